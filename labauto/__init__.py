@@ -1,0 +1,15 @@
+"""labauto: an open workcell controller for automated colony picking.
+
+The detector implements Teutsch et al., "Real-time detection of elliptic shapes for automated
+object recognition and object tracking": contours, the shape angle D_alpha, shape descriptors,
+a harmonic analysis and geometric ellipse fitting.
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("labauto")
+except PackageNotFoundError:  # running from a source tree that is not installed
+    __version__ = "0.0.0"
+
+__all__ = ["__version__"]
