@@ -12,4 +12,6 @@ try:
 except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0"
 
-__all__ = ["__version__"]
+from labauto.api import analyze_plate, detect
+
+__all__ = ["__version__", "analyze_plate", "detect"]

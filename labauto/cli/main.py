@@ -1,0 +1,65 @@
+"""The ``labauto`` command: one entry point, a subcommand per job.
+
+Errors go to stderr as one line, ``labauto: error: <what was wrong>``, with exit code 1 (2 for a
+usage error); ``--debug`` shows the traceback instead.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from labauto import __version__
+from labauto.errors import LabautoError
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="labauto")
+@click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
+@click.pass_context
+def cli(ctx: click.Context, debug: bool) -> None:
+    """labauto: detect colonies on plate images and pick them with a workcell."""
+    ctx.ensure_object(dict)
+    ctx.obj["debug"] = debug
+
+
+def _register_commands() -> None:
+    from labauto.cli import db, plugins_cmd, vision_cmds
+
+    cli.add_command(vision_cmds.detect_cmd)
+    cli.add_command(vision_cmds.plate_cmd)
+    cli.add_command(plugins_cmd.plugins)
+    cli.add_command(db.db)
+
+
+_register_commands()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the CLI and turn errors into one-line messages and exit codes."""
+    args = sys.argv[1:] if argv is None else argv
+    debug = "--debug" in args
+    try:
+        cli.main(args=args, prog_name="labauto", standalone_mode=False)
+    except click.exceptions.Exit as exc:
+        return exc.exit_code
+    except click.ClickException as exc:
+        exc.show()
+        return exc.exit_code
+    except click.exceptions.Abort:
+        click.echo("labauto: aborted", err=True)
+        return 130
+    except (LabautoError, ValueError, OSError) as exc:
+        if debug:
+            raise
+        click.echo(f"labauto: error: {exc}", err=True)
+        return 1
+    except KeyboardInterrupt:
+        click.echo("labauto: interrupted", err=True)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,371 @@
+"""Workcell configuration: YAML files validated when loaded.
+
+A config file has one section per part of the workcell (see ``configs/colony-picking.yaml``).
+Every section is validated on load: an unknown key, a wrong type or an out-of-range value fails
+with one line naming the file, the dotted key path and what was expected, for example::
+
+    configs/x.yaml: robot.port: expected a string, got 3
+
+Relative paths in a config are taken relative to the current directory, as a shell would. The
+database URL and the device ports can be overridden from the environment (see ``ENV_OVERRIDES``);
+an override is validated like the file and its errors name the variable.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import importlib
+import os
+import typing
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, model_validator
+
+from labauto.errors import ConfigError
+
+#: Environment variables that override one config key each.
+ENV_OVERRIDES: dict[str, str] = {
+    "LABAUTO_DATABASE_URL": "database.url",
+    "LABAUTO_ROBOT_PORT": "robot.port",
+    "LABAUTO_ANALYZER_HOST": "analyzer.host",
+    "LABAUTO_ANALYZER_PORT": "analyzer.port",
+    "LABAUTO_ANALYZER_SERIAL_PORT": "analyzer.serial_port",
+}
+
+Positive = Annotated[float, Field(gt=0)]
+NonNegative = Annotated[float, Field(ge=0)]
+Range = tuple[float, float]
+
+
+class Section(BaseModel):
+    """Base of every config section: unknown keys are errors."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class DatabaseConfig(Section):
+    url: str = "sqlite:///labauto.db"
+
+
+class PluginsConfig(Section):
+    enabled: list[str] | None = None
+    disabled: list[str] = []
+
+
+class CameraConfig(Section):
+    driver: str = "folder"
+    #: A folder or a single image file; ``samples`` means the plates bundled with labauto.
+    path: str = "samples"
+    pattern: str = "*.png"
+
+
+class SimulatorConfig(Section):
+    """Settings of a simulated device, used when ``simulate`` is true."""
+
+    speed_factor: Positive = 1.0
+    transport: Literal["pty", "tcp"] = "pty"
+    faults: dict[str, Any] = {}
+
+
+class DeckPoint(Section):
+    x: float
+    y: float
+    z: float = 0.0
+
+
+class RobotConfig(Section):
+    driver: str = "grbl"
+    simulate: bool = True
+    simulator: SimulatorConfig = SimulatorConfig(speed_factor=20.0)
+    port: str = "/dev/ttyUSB0"
+    baudrate: Annotated[int, Field(gt=0)] = 115200
+    timeout_s: Positive = 2.0
+    motion_timeout_s: Positive = 60.0
+    limits_x_mm: Range = (0.0, 300.0)
+    limits_y_mm: Range = (0.0, 200.0)
+    limits_z_mm: Range = (-50.0, 0.0)
+    safe_z_mm: float = -5.0
+    pick_z_mm: float = -30.0
+    dwell_s: NonNegative = 0.2
+    travel_feed: Positive = 3000.0
+    z_feed: Positive = 1000.0
+    home_on_start: bool = True
+    deposit: DeckPoint = DeckPoint(x=280.0, y=180.0, z=-20.0)
+
+    @model_validator(mode="after")
+    def _check_ranges(self) -> RobotConfig:
+        for axis in ("x", "y", "z"):
+            low, high = getattr(self, f"limits_{axis}_mm")
+            if low >= high:
+                raise ValueError(f"limits_{axis}_mm: expected [min, max] with min < max")
+        return self
+
+
+class AnalyzerConfig(Section):
+    driver: str = "modbus"
+    simulate: bool = True
+    simulator: SimulatorConfig = SimulatorConfig(speed_factor=20.0, transport="tcp")
+    transport: Literal["tcp", "rtu"] = "tcp"
+    host: str = "127.0.0.1"
+    port: Annotated[int, Field(ge=0, le=65535)] = 502
+    serial_port: str = "/dev/ttyUSB1"
+    baudrate: Annotated[int, Field(gt=0)] = 19200
+    unit: Annotated[int, Field(ge=0, le=247)] = 1
+    #: A YAML register map; ``None`` uses the map shipped with labauto.
+    register_map: str | None = None
+    timeout_s: Positive = 2.0
+    analysis_timeout_s: Positive = 120.0
+
+
+class CalibrationPoint(Section):
+    pixel: tuple[float, float]
+    deck: tuple[float, float]
+
+
+class CalibrationConfig(Section):
+    """Pixel-to-deck calibration from at least four point pairs (fiducials)."""
+
+    points: Annotated[list[CalibrationPoint], Field(min_length=4)] = [
+        CalibrationPoint(pixel=(0.0, 0.0), deck=(20.0, 20.0)),
+        CalibrationPoint(pixel=(1279.0, 0.0), deck=(148.0, 20.0)),
+        CalibrationPoint(pixel=(1279.0, 1023.0), deck=(148.0, 122.3)),
+        CalibrationPoint(pixel=(0.0, 1023.0), deck=(20.0, 122.3)),
+    ]
+    max_residual_mm: Positive = 0.5
+
+
+class PickingConfig(Section):
+    max_picks: Annotated[int, Field(ge=0)] = 8
+    min_neighbor_distance_px: NonNegative = 12.0
+    min_rim_distance_px: NonNegative = 20.0
+    order: Literal["largest", "smallest", "roundest", "scan"] = "largest"
+    classes: list[Literal["authentic"]] = ["authentic"]
+
+
+class OutputConfig(Section):
+    dir: str = "out"
+    annotate: bool = True
+
+
+class Config(Section):
+    """A whole workcell configuration."""
+
+    name: str = "colony-picking"
+    database: DatabaseConfig = DatabaseConfig()
+    plugins: PluginsConfig = PluginsConfig()
+    segmenter: str = "canny"
+    detector: dict[str, Any] = {}
+    plate: dict[str, Any] = {}
+    camera: CameraConfig = CameraConfig()
+    robot: RobotConfig = RobotConfig()
+    analyzer: AnalyzerConfig = AnalyzerConfig()
+    calibration: CalibrationConfig = CalibrationConfig()
+    picking: PickingConfig = PickingConfig()
+    output: OutputConfig = OutputConfig()
+
+
+_EXPECTED = {
+    "string_type": "a string",
+    "int_type": "an integer",
+    "int_parsing": "an integer",
+    "int_from_float": "an integer",
+    "float_type": "a number",
+    "float_parsing": "a number",
+    "bool_type": "true or false",
+    "bool_parsing": "true or false",
+    "list_type": "a list",
+    "tuple_type": "a list",
+    "dict_type": "a mapping",
+    "model_type": "a mapping",
+    "model_attributes_type": "a mapping",
+}
+
+
+def _describe(error: dict[str, Any]) -> str:
+    """Turn one pydantic error into ``expected ..., got ...``."""
+    kind = error["type"]
+    got = error.get("input")
+    ctx = error.get("ctx") or {}
+    if kind == "extra_forbidden":
+        return "unknown key"
+    if kind == "missing":
+        return "missing required key"
+    if kind in _EXPECTED:
+        return f"expected {_EXPECTED[kind]}, got {got!r}"
+    bounds = {
+        "greater_than": ">",
+        "greater_than_equal": ">=",
+        "less_than": "<",
+        "less_than_equal": "<=",
+    }
+    if kind in bounds:
+        limit = next(iter(ctx.values()))
+        return f"expected a value {bounds[kind]} {limit}, got {got!r}"
+    if kind == "literal_error":
+        return f"expected {ctx.get('expected')}, got {got!r}"
+    if kind == "too_short":
+        return f"expected at least {ctx.get('min_length')} items, got {len(got)}"
+    if kind == "too_long":
+        return f"expected at most {ctx.get('max_length')} items, got {len(got)}"
+    message = str(error["msg"])
+    message = message.removeprefix("Value error, ")
+    return message
+
+
+def _format(source: str, exc: ValidationError, prefix: str = "") -> str:
+    lines = []
+    for error in exc.errors():
+        path = ".".join(str(part) for part in (prefix, *error["loc"]) if part != "")
+        lines.append(
+            f"{source}: {path}: {_describe(error)}" if path else f"{source}: {_describe(error)}"
+        )
+    return "\n".join(lines)
+
+
+def _set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
+    node = data
+    *parents, leaf = dotted.split(".")
+    for key in parents:
+        child = node.get(key)
+        if not isinstance(child, dict):
+            child = {}
+            node[key] = child
+        node = child
+    node[leaf] = value
+
+
+def apply_env_overrides(data: dict[str, Any], environ: dict[str, str] | None = None) -> list[str]:
+    """Apply ``ENV_OVERRIDES`` found in ``environ`` to ``data``; return the variables used."""
+    environ = os.environ if environ is None else environ
+    used = []
+    for variable, dotted in ENV_OVERRIDES.items():
+        if variable in environ:
+            raw = environ[variable]
+            value: Any = int(raw) if dotted == "analyzer.port" and raw.strip().isdigit() else raw
+            _set_dotted(data, dotted, value)
+            used.append(variable)
+    return used
+
+
+#: Config sections that hold the parameters of a vision dataclass: (module, class name).
+DATACLASS_SECTIONS: dict[str, tuple[str, str]] = {
+    "detector": ("labauto.vision.detector", "DetectorParams"),
+    "plate": ("labauto.vision.plate", "PlateParams"),
+}
+
+#: Ranges and choices for fields of those dataclasses, checked when a config is loaded.
+SECTION_CONSTRAINTS: dict[str, dict[str, Any]] = {
+    "detector": {
+        "blur_sigma": Field(ge=0),
+        "canny_low": Field(ge=0),
+        "canny_high": Field(gt=0),
+        "color_threshold": Field(gt=0),
+        "min_contour_length": Field(ge=3),
+        "max_contour_length": Field(ge=3),
+        "des_threshold_deg": Field(gt=0, le=90),
+        "statistic": Literal["median", "mean"],
+    },
+    "plate": {},
+}
+
+
+@functools.cache
+def section_model(section: str) -> type[BaseModel]:
+    """A pydantic model of a dataclass section: its fields, types, defaults and constraints."""
+    module_name, class_name = DATACLASS_SECTIONS[section]
+    cls = getattr(importlib.import_module(module_name), class_name)
+    hints = typing.get_type_hints(cls)
+    constraints = SECTION_CONSTRAINTS.get(section, {})
+    fields: dict[str, Any] = {}
+    for item in dataclasses.fields(cls):
+        if item.default is not dataclasses.MISSING:
+            default = item.default
+        elif item.default_factory is not dataclasses.MISSING:
+            default = item.default_factory()
+        else:
+            default = ...
+        rule = constraints.get(item.name)
+        if rule is None:
+            annotation = hints[item.name]
+        elif isinstance(rule, type(Field())):
+            annotation = Annotated[hints[item.name], rule]
+        else:
+            annotation = rule
+        fields[item.name] = (annotation, default)
+    return create_model(f"{class_name}Section", __base__=Section, **fields)
+
+
+def _section_params(config: Config, section: str) -> Any:
+    module_name, class_name = DATACLASS_SECTIONS[section]
+    cls = getattr(importlib.import_module(module_name), class_name)
+    validated = section_model(section).model_validate(getattr(config, section))
+    return cls(**{item.name: getattr(validated, item.name) for item in dataclasses.fields(cls)})
+
+
+def detector_params(config: Config) -> Any:
+    """The ``DetectorParams`` of a config's ``detector`` section."""
+    return _section_params(config, "detector")
+
+
+def plate_params(config: Config) -> Any:
+    """The ``PlateParams`` of a config's ``plate`` section."""
+    return _section_params(config, "plate")
+
+
+def parse_config(
+    data: Any, source: str = "<config>", environ: dict[str, str] | None = None
+) -> Config:
+    """Validate a config mapping (as read from YAML) and apply environment overrides.
+
+    Raises
+    ------
+    ConfigError
+        With one line per problem: ``source: dotted.key: what was expected``.
+    """
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: expected a mapping of sections, got {type(data).__name__}")
+    data = dict(data)
+    used = apply_env_overrides(data, environ)
+    if used:
+        source = f"{source} (with {', '.join(used)} from the environment)"
+    try:
+        config = Config.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(_format(source, exc)) from None
+    for section in DATACLASS_SECTIONS:
+        try:
+            section_model(section).model_validate(getattr(config, section))
+        except ValidationError as exc:
+            raise ConfigError(_format(source, exc, prefix=section)) from None
+    return config
+
+
+def load_config(path: str | Path | None, environ: dict[str, str] | None = None) -> Config:
+    """Read and validate a YAML config file; ``None`` gives the defaults (a simulated workcell).
+
+    Raises
+    ------
+    ConfigError
+        If the file is missing, is not YAML, or fails validation.
+    """
+    if path is None:
+        return parse_config({}, "<defaults>", environ)
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: config file not found") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read config file ({exc.strerror})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(f"{path}: not valid YAML{where}") from None
+    return parse_config(data, str(path), environ)

@@ -1,0 +1,108 @@
+"""Pixel-to-deck calibration: a homography from point pairs, with its residual.
+
+The camera looks down on a flat deck, so image pixels map to deck millimetres by a plane
+homography H (3x3). It is estimated by least squares (``cv2.findHomography`` with method 0) from
+four or more pairs of a pixel position and its deck position (fiducials on the deck or points
+configured by hand). The residual is the RMS distance, in millimetres, between each configured deck
+point and where H maps its pixel; a calibration whose residual exceeds ``max_residual_mm`` is
+refused. With exactly four pairs the homography fits them exactly and the residual is 0 by
+construction, which says nothing about its quality: ``overdetermined`` tells the two cases apart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from labauto.errors import CalibrationError
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """A pixel-to-deck homography and how well it fits its points.
+
+    Attributes
+    ----------
+    homography : ndarray
+        3x3 matrix mapping homogeneous pixel coordinates to deck millimetres.
+    residual_mm : float
+        RMS reprojection error of the calibration points, in millimetres.
+    max_error_mm : float
+        Largest reprojection error of one point, in millimetres.
+    n_points : int
+        Number of point pairs used.
+    """
+
+    homography: np.ndarray
+    residual_mm: float
+    max_error_mm: float
+    n_points: int
+
+    @property
+    def overdetermined(self) -> bool:
+        """True when more than four points were used, so the residual is meaningful."""
+        return self.n_points > 4
+
+    @classmethod
+    def from_points(
+        cls, pixels: np.ndarray, deck_mm: np.ndarray, max_residual_mm: float = 0.5
+    ) -> Calibration:
+        """Estimate the homography from point pairs and check its residual.
+
+        Parameters
+        ----------
+        pixels : ndarray
+            (n, 2) pixel positions, n >= 4.
+        deck_mm : ndarray
+            (n, 2) deck positions in millimetres of the same points.
+        max_residual_mm : float
+            Largest RMS residual accepted.
+
+        Raises
+        ------
+        CalibrationError
+            Fewer than four pairs, a degenerate set (e.g. collinear points), or a residual over
+            ``max_residual_mm``.
+        """
+        src = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+        dst = np.asarray(deck_mm, dtype=np.float64).reshape(-1, 2)
+        if len(src) != len(dst):
+            raise CalibrationError(f"{len(src)} pixel points but {len(dst)} deck points")
+        if len(src) < 4:
+            raise CalibrationError(f"a homography needs at least 4 point pairs, got {len(src)}")
+        homography, _ = cv2.findHomography(src, dst, 0)
+        if homography is None or not np.all(np.isfinite(homography)):
+            raise CalibrationError("calibration points are degenerate (collinear or repeated)")
+        errors = np.linalg.norm(_apply(homography, src) - dst, axis=1)
+        residual = float(np.sqrt(np.mean(errors**2)))
+        if residual > max_residual_mm:
+            worst = int(np.argmax(errors))
+            raise CalibrationError(
+                f"calibration residual {residual:.3f} mm exceeds the limit of "
+                f"{max_residual_mm:.3f} mm (worst: point {worst}, {errors[worst]:.3f} mm off)"
+            )
+        return cls(homography, residual, float(errors.max()), len(src))
+
+    def to_deck(self, pixels: np.ndarray) -> np.ndarray:
+        """Map (n, 2) pixel positions to (n, 2) deck positions in millimetres."""
+        return _apply(self.homography, np.asarray(pixels, dtype=np.float64).reshape(-1, 2))
+
+    def to_pixels(self, deck_mm: np.ndarray) -> np.ndarray:
+        """Map (n, 2) deck positions in millimetres back to pixel positions."""
+        inverse = np.linalg.inv(self.homography)
+        return _apply(inverse, np.asarray(deck_mm, dtype=np.float64).reshape(-1, 2))
+
+    def to_dict(self) -> dict:
+        """JSON form: the matrix and the residuals."""
+        return {
+            "homography": self.homography.tolist(),
+            "residual_mm": self.residual_mm,
+            "max_error_mm": self.max_error_mm,
+            "n_points": self.n_points,
+        }
+
+
+def _apply(homography: np.ndarray, points: np.ndarray) -> np.ndarray:
+    return cv2.perspectiveTransform(points.reshape(-1, 1, 2), homography).reshape(-1, 2)
