@@ -72,6 +72,8 @@ class Calibration:
             raise CalibrationError(f"{len(src)} pixel points but {len(dst)} deck points")
         if len(src) < 4:
             raise CalibrationError(f"a homography needs at least 4 point pairs, got {len(src)}")
+        if _collinear(src) or _collinear(dst):
+            raise CalibrationError("calibration points are degenerate (collinear or repeated)")
         homography, _ = cv2.findHomography(src, dst, 0)
         if homography is None or not np.all(np.isfinite(homography)):
             raise CalibrationError("calibration points are degenerate (collinear or repeated)")
@@ -102,6 +104,12 @@ class Calibration:
             "max_error_mm": self.max_error_mm,
             "n_points": self.n_points,
         }
+
+
+def _collinear(points: np.ndarray) -> bool:
+    """True when the points do not span the plane (all on one line, or repeated)."""
+    spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+    return bool(spread[1] <= 1e-9 * max(spread[0], 1.0))
 
 
 def _apply(homography: np.ndarray, points: np.ndarray) -> np.ndarray:
