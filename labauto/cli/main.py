@@ -25,11 +25,14 @@ def cli(ctx: click.Context, debug: bool) -> None:
 
 
 def _register_commands() -> None:
-    from labauto.cli import db, plugins_cmd, vision_cmds
+    from labauto.cli import db, plugins_cmd, run_cmds, vision_cmds
 
     cli.add_command(vision_cmds.detect_cmd)
     cli.add_command(vision_cmds.plate_cmd)
     cli.add_command(plugins_cmd.plugins)
+    cli.add_command(run_cmds.run_cmd)
+    cli.add_command(run_cmds.runs)
+    cli.add_command(run_cmds.devices)
     cli.add_command(db.db)
 
 

@@ -1,0 +1,73 @@
+"""Camera sources: image files or a folder of them, and a simulated camera of generated plates.
+
+A camera is an iterable of ``(name, image)`` pairs, ``image`` a BGR ``uint8`` array. A real
+camera is a plugin that registers a ``camera`` driver with the same shape.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from importlib import resources
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from labauto.drivers.errors import DeviceError
+
+#: The ``path`` that names the sample plates bundled with labauto.
+SAMPLES = "samples"
+
+
+def sample_plates_dir() -> Path:
+    """The folder of the sample plates that ship with labauto."""
+    return Path(str(resources.files("labauto") / "data" / "plates"))
+
+
+class FolderCamera:
+    """Serve the images of a folder (sorted by name) or a single image file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A folder, an image file, or ``"samples"`` for the bundled sample plates.
+    pattern : str
+        Glob pattern of the images in a folder.
+    """
+
+    def __init__(self, path: str | Path, pattern: str = "*.png") -> None:
+        self.path = sample_plates_dir() if str(path) == SAMPLES else Path(path)
+        self.pattern = pattern
+
+    def files(self) -> list[Path]:
+        """The image files this camera serves, in order; raises if there are none."""
+        if self.path.is_file():
+            return [self.path]
+        if not self.path.is_dir():
+            raise DeviceError(f"{self.path}: no such image folder or file", device="camera")
+        files = sorted(p for p in self.path.glob(self.pattern) if p.is_file())
+        if not files:
+            raise DeviceError(f"{self.path}: no images matching {self.pattern!r}", device="camera")
+        return files
+
+    def __iter__(self) -> Iterator[tuple[str, np.ndarray]]:
+        for file in self.files():
+            image = cv2.imread(str(file), cv2.IMREAD_COLOR)
+            if image is None:
+                raise DeviceError(f"{file}: not a readable image", device="camera")
+            yield file.stem, image
+
+
+class SimulatedCamera:
+    """Serve ``count`` synthetic plates generated from consecutive seeds."""
+
+    def __init__(self, count: int = 3, first_seed: int = 0) -> None:
+        self.count = count
+        self.first_seed = first_seed
+
+    def __iter__(self) -> Iterator[tuple[str, np.ndarray]]:
+        from labauto.synthetic.plates import generate_plate
+
+        for seed in range(self.first_seed, self.first_seed + self.count):
+            image, _truth = generate_plate(seed)
+            yield f"simulated-{seed:04d}", image

@@ -1,0 +1,401 @@
+"""The colony-picking run (paper, section 4.1): plates in, picked and analysed colonies out.
+
+A run takes plates from the camera, analyses each (the ``plate`` application), stores its
+detections and colonies, plans the picks, and for each pick moves the robot to the colony, takes a
+probe, delivers it to the analyzer, runs the analysis and stores the result. Every step is an
+event in the audit log; every device exchange is an event too (``robot.tx`` / ``robot.rx`` ...).
+
+Picks move through ``planned -> moving -> picked -> delivered -> analyzed`` (or ``failed``), and
+each state is committed before the device is asked to do the next thing. That makes a crash
+recoverable: when a run is resumed, a pick found in ``moving``, ``picked`` or ``delivered`` has an
+unknown outcome (the probe may or may not be on the tool or in the analyzer), so it is set to
+``unknown`` and flagged for the operator instead of being repeated; ``planned`` picks go on; a
+plate whose colonies are already stored is not stored again, so nothing is picked twice and
+nothing stored is lost.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from labauto.config import Config, plate_params
+from labauto.drivers.errors import DeviceError
+from labauto.orchestrator.calibration import Calibration
+from labauto.orchestrator.control import EmergencyStop, RunControl, StopRequested
+from labauto.orchestrator.planning import PickRules, plan_picks
+from labauto.plugin_manager import Plugins
+from labauto.store import Store
+from labauto.store.states import PickState, RunState
+
+IN_FLIGHT = (PickState.MOVING, PickState.PICKED, PickState.DELIVERED)
+
+
+class Reporter(Protocol):
+    """Receives every run event as it happens (the CLI shows progress with it)."""
+
+    def on_event(self, kind: str, message: str, data: dict[str, Any]) -> None: ...
+
+
+@dataclass
+class Workcell:
+    """The connected devices of a run. ``close()`` disconnects them and stops simulators."""
+
+    robot: Any
+    analyzer: Any
+    camera: Iterable[tuple[str, np.ndarray]]
+    closers: list[Callable[[], None]] = field(default_factory=list)
+
+    def close(self) -> None:
+        for close in reversed(self.closers):
+            with contextlib.suppress(Exception):  # closing must not mask the run's outcome
+                close()
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """How a run ended."""
+
+    run_id: int
+    state: str
+    error: str | None
+    picks: dict[str, int]
+    output_dir: Path
+
+
+def calibration_from_config(config: Config) -> Calibration:
+    """The pixel-to-deck calibration of a config (refused if its residual is too large)."""
+    points = config.calibration.points
+    return Calibration.from_points(
+        np.array([p.pixel for p in points]),
+        np.array([p.deck for p in points]),
+        config.calibration.max_residual_mm,
+    )
+
+
+def image_digest(image: np.ndarray) -> str:
+    """SHA-256 of an image's shape and pixels: the identity of a plate image within a run."""
+    digest = hashlib.sha256(str(image.shape).encode())
+    digest.update(np.ascontiguousarray(image).tobytes())
+    return digest.hexdigest()
+
+
+class ColonyPickingRun:
+    """One run of the workcell; ``execute()`` drives it to a final state.
+
+    Parameters
+    ----------
+    run_id : int
+        The stored run (new, or an unfinished one being resumed).
+    config : Config
+        The validated workcell config.
+    store : Store
+        Where everything is recorded.
+    plugins : Plugins
+        Source of the plate application and the event hooks.
+    workcell : Workcell
+        The devices.
+    control : RunControl
+        Pause / resume / stop / e-stop requests.
+    reporter : Reporter, optional
+        Told about every event (progress display).
+    """
+
+    def __init__(
+        self,
+        run_id: int,
+        config: Config,
+        store: Store,
+        plugins: Plugins,
+        workcell: Workcell,
+        control: RunControl,
+        reporter: Reporter | None = None,
+    ) -> None:
+        self.run_id = run_id
+        self.config = config
+        self.store = store
+        self.plugins = plugins
+        self.workcell = workcell
+        self.control = control
+        self.reporter = reporter
+        self.output_dir = Path(config.output.dir) / f"run-{run_id:04d}"
+        self.rules = PickRules(
+            max_picks=config.picking.max_picks,
+            min_neighbor_distance_px=config.picking.min_neighbor_distance_px,
+            min_rim_distance_px=config.picking.min_rim_distance_px,
+            order=config.picking.order,
+            classes=tuple(config.picking.classes),
+        )
+
+    # -- the audit log -----------------------------------------------------------------------
+    def event(self, kind: str, message: str, source: str = "orchestrator", **data: Any) -> None:
+        """Record one event in the audit log and tell the reporter."""
+        self.store.record_event(self.run_id, kind, message, source=source, data=data or None)
+        if self.reporter is not None:
+            self.reporter.on_event(kind, message, data)
+
+    def exchange_logger(self, device: str) -> Callable[[str, str], None]:
+        """A callback for a driver's ``on_exchange``: one event per line sent or received."""
+
+        def log(direction: str, text: str) -> None:
+            self.store.record_event(
+                self.run_id, f"{device}.{direction}", text, source=device, data=None
+            )
+
+        return log
+
+    def _hook(self, name: str, **kwargs: Any) -> None:
+        """Call an event hook; a failing exporter is logged, never fatal to the run."""
+        try:
+            getattr(self.plugins.hook, name)(**kwargs)
+        except Exception as exc:
+            self.event("plugin.error", f"{name} failed: {type(exc).__name__}: {exc}")
+
+    # -- the run -----------------------------------------------------------------------------
+    def execute(self) -> RunOutcome:
+        """Run (or resume) to a final state: succeeded, stopped or failed."""
+        self._flag_unknown_picks()
+        self.store.set_run_state(self.run_id, RunState.RUNNING)
+        self.event("run.state", "running")
+        final, error = RunState.SUCCEEDED, None
+        try:
+            calibration = calibration_from_config(self.config)
+            self.event(
+                "calibration",
+                f"pixel-to-deck residual {calibration.residual_mm:.3f} mm "
+                f"over {calibration.n_points} points",
+                **calibration.to_dict(),
+            )
+            self._prepare_devices()
+            for plate_name, image in self.workcell.camera:
+                self._checkpoint()
+                self._process_plate(plate_name, image, calibration)
+        except StopRequested:
+            final, error = RunState.STOPPED, None
+            self._cleanup()
+        except EmergencyStop:
+            final, error = RunState.STOPPED, "emergency stop"
+            self._flag_unknown_picks()
+        except Exception as exc:
+            final, error = RunState.FAILED, f"{type(exc).__name__}: {exc}"
+            self._flag_unknown_picks()
+        return self._finish(final, error)
+
+    def _finish(self, final: RunState, error: str | None) -> RunOutcome:
+        if final is not RunState.SUCCEEDED:
+            self.store.set_run_state(self.run_id, RunState.STOPPING)
+        self.store.set_run_state(self.run_id, final, error=error)
+        self.event("run.state", final.value + (f": {error}" if error else ""))
+        summary = self.store.run_summary(self.run_id)
+        picks = dict(summary.picks_by_state)
+        self._hook(
+            "labauto_run_finished", run_id=self.run_id, state=final.value, summary={"picks": picks}
+        )
+        return RunOutcome(self.run_id, final.value, error, picks, self.output_dir)
+
+    def _checkpoint(self) -> None:
+        def on_pause(waiting: bool) -> None:
+            state = RunState.PAUSED if waiting else RunState.RUNNING
+            self.store.set_run_state(self.run_id, state)
+            self.event("run.state", state.value)
+
+        self.control.checkpoint(on_pause)
+
+    def _prepare_devices(self) -> None:
+        robot, analyzer = self.workcell.robot, self.workcell.analyzer
+        robot.connect()
+        self.event("robot.ready", f"robot connected: {robot.identify()}", source="robot")
+        if self.config.robot.home_on_start:
+            robot.home()
+            self.event("robot.homed", "robot homed", source="robot")
+        analyzer.connect()
+        self.event(
+            "analyzer.ready", f"analyzer connected: {analyzer.identify()}", source="analyzer"
+        )
+
+    def _cleanup(self) -> None:
+        """After a stop: tool off and head up, so the deck is safe to reach into."""
+        try:
+            self.workcell.robot.tool_off()
+            self.workcell.robot.raise_to_safe_height()
+        except Exception as exc:
+            self.event("run.cleanup", f"cleanup incomplete: {exc}")
+
+    def _flag_unknown_picks(self) -> None:
+        for pick in self.store.picks_in_flight(self.run_id):
+            self.store.set_pick_state(
+                pick.id,
+                PickState.UNKNOWN,
+                needs_attention=True,
+                error=f"outcome unknown: interrupted while {pick.state}",
+            )
+            self.event(
+                "pick.unknown",
+                f"pick {pick.id} (colony {pick.colony_id}) was {pick.state} when the run was "
+                "interrupted: flagged for the operator, not repeated",
+                pick_id=pick.id,
+            )
+
+    # -- one plate ---------------------------------------------------------------------------
+    def _process_plate(self, plate_name: str, image: np.ndarray, calibration: Calibration) -> None:
+        application = self.plugins.registry.get("applications", "plate")
+        result = application(image, plate_params(self.config))
+        plate = self.store.add_plate(plate_name, source=self.config.camera.path)
+        stored = self.store.add_image(
+            plate.id,
+            path=plate_name,
+            width=result.width,
+            height=result.height,
+            sha256=image_digest(image),
+            run_id=self.run_id,
+        )
+        colony_ids = self.store.colony_ids_for_image(self.run_id, stored.id)
+        if colony_ids:
+            self.event(
+                "plate.resumed",
+                f"{plate_name}: colonies already stored, not re-stored",
+                plate=plate_name,
+            )
+        else:
+            colony_ids = self._store_plate(plate_name, stored.id, result, calibration)
+        id_of = dict(zip([c.id for c in result.colonies], colony_ids, strict=True))
+        self._write_outputs(plate_name, image, result, id_of)
+        for pick in self.store.picks_for_run(self.run_id):
+            if pick.colony_id in colony_ids and pick.state == PickState.PLANNED:
+                self._checkpoint()
+                self._do_pick(pick)
+        self._write_outputs(plate_name, image, result, id_of)
+
+    def _store_plate(
+        self, plate_name: str, image_id: int, result: Any, calibration: Calibration
+    ) -> list[int]:
+        counts = result.counts
+        self.event(
+            "plate.analyzed",
+            f"{plate_name}: {counts['authentic']} authentic, {counts['merged']} merged, "
+            f"{counts['mixed']} mixed ({result.timing_ms:.1f} ms)",
+            plate=plate_name,
+            **counts,
+        )
+        detections = [_detection_row(i, c) for i, c in enumerate(result.colonies)]
+        self.store.add_detections(self.run_id, image_id, detections)
+        self._hook(
+            "labauto_detections_stored",
+            run_id=self.run_id,
+            image_id=image_id,
+            plate=plate_name,
+            count=len(detections),
+        )
+        colony_ids = self.store.add_colonies(
+            self.run_id, image_id, [_colony_row(i, c) for i, c in enumerate(result.colonies)]
+        )
+        id_of = dict(zip([c.id for c in result.colonies], colony_ids, strict=True))
+        planned = plan_picks(result.colonies, calibration, self.rules, result.dish)
+        self.store.plan_picks(
+            self.run_id,
+            [
+                {
+                    "colony_id": id_of[p.colony_id],
+                    "sequence": p.sequence,
+                    "deck_x_mm": p.deck_mm[0],
+                    "deck_y_mm": p.deck_mm[1],
+                }
+                for p in planned
+            ],
+        )
+        self.event(
+            "picks.planned",
+            f"{plate_name}: {len(planned)} picks planned",
+            plate=plate_name,
+            picks=len(planned),
+        )
+        return colony_ids
+
+    # -- one pick ----------------------------------------------------------------------------
+    def _do_pick(self, pick: Any) -> None:
+        robot, analyzer, cfg = self.workcell.robot, self.workcell.analyzer, self.config.robot
+        sample_id = f"R{self.run_id:04d}P{pick.id:05d}"
+        started = time.perf_counter()
+        try:
+            self._pick_state(pick, PickState.MOVING, sample_id=sample_id)
+            robot.pick(pick.deck_x_mm, pick.deck_y_mm, cfg.pick_z_mm, cfg.dwell_s)
+            self._pick_state(pick, PickState.PICKED)
+            robot.deposit(cfg.deposit.x, cfg.deposit.y, cfg.deposit.z)
+            self._pick_state(pick, PickState.DELIVERED)
+            values = analyzer.analyze(sample_id, self.config.analyzer.analysis_timeout_s)
+            self.store.add_analyzer_result(pick.id, sample_id, values)
+            self._pick_state(pick, PickState.ANALYZED)
+        except DeviceError as exc:
+            if self.control.estopped:
+                raise EmergencyStop("emergency stop") from exc
+            self._pick_failed(pick, exc)
+        self.event(
+            "pick.done",
+            f"pick {pick.id} finished in {(time.perf_counter() - started) * 1000:.0f} ms",
+            pick_id=pick.id,
+        )
+        final = self.store.get_pick(pick.id)
+        self._hook("labauto_pick_finished", run_id=self.run_id, pick=final.to_dict())
+
+    def _pick_state(self, pick: Any, state: PickState, **fields: Any) -> None:
+        self.store.set_pick_state(pick.id, state, **fields)
+        self.event(
+            "pick.state", f"pick {pick.id}: {state.value}", pick_id=pick.id, state=state.value
+        )
+
+    def _pick_failed(self, pick: Any, exc: DeviceError) -> None:
+        """Mark the pick failed and bring the device that failed back, or fail the run."""
+        self.store.set_pick_state(pick.id, PickState.FAILED, error=str(exc))
+        self.event("pick.failed", f"pick {pick.id} failed: {exc}", pick_id=pick.id, error=str(exc))
+        device = self.workcell.robot if exc.device == "robot" else self.workcell.analyzer
+        device.recover()
+        self.event(
+            f"{exc.device}.recovered", f"{exc.device} recovered after: {exc}", source=exc.device
+        )
+
+    # -- operator output ---------------------------------------------------------------------
+    def _write_outputs(
+        self, plate_name: str, image: np.ndarray, result: Any, id_of: dict[int, int]
+    ) -> None:
+        from labauto.report import write_plate_outputs
+
+        if not self.config.output.annotate:
+            return
+        states = {pick.colony_id: pick.state for pick in self.store.picks_for_run(self.run_id)}
+        picked = {cid for cid, state in states.items() if state != PickState.PLANNED}
+        local_picked = {local for local, stored in id_of.items() if stored in picked}
+        write_plate_outputs(self.output_dir, plate_name, image, result, local_picked)
+
+
+def _detection_row(index: int, colony: Any) -> dict[str, Any]:
+    return {
+        "object_index": index,
+        "method": "plate",
+        "centroid_x": float(colony.centroid[0]),
+        "centroid_y": float(colony.centroid[1]),
+        "n_points": len(colony.contour),
+        "closed": True,
+        "d_alpha_median": float(colony.d_alpha_median),
+        "is_des": colony.klass != "merged",
+        "area_px": float(colony.area_px),
+    }
+
+
+def _colony_row(index: int, colony: Any) -> dict[str, Any]:
+    return {
+        "colony_index": index,
+        "klass": colony.klass,
+        "centroid_x": float(colony.centroid[0]),
+        "centroid_y": float(colony.centroid[1]),
+        "area_px": float(colony.area_px),
+        "d_alpha_median": float(colony.d_alpha_median),
+        "estimated_count": int(colony.estimated_count),
+        "contour": np.asarray(colony.contour).round(2).tolist(),
+    }
