@@ -60,14 +60,27 @@ class CameraConfig(Section):
     #: A folder or a single image file; ``samples`` means the plates bundled with labauto.
     path: str = "samples"
     pattern: str = "*.png"
+    #: Number of plates the ``simulated`` camera generates.
+    count: Annotated[int, Field(ge=1)] = 3
 
 
-class SimulatorConfig(Section):
-    """Settings of a simulated device, used when ``simulate`` is true."""
+class RobotSimulatorConfig(Section):
+    """The simulated gantry used when ``robot.simulate`` is true."""
 
-    speed_factor: Positive = 1.0
+    speed_factor: Positive = 20.0
     transport: Literal["pty", "tcp"] = "pty"
-    faults: dict[str, Any] = {}
+    #: Faults armed from the start, e.g. ``[{kind: no_reply, count: 1}]`` (see grbl_sim).
+    faults: list[dict[str, Any]] = []
+
+
+class AnalyzerSimulatorConfig(Section):
+    """The simulated analyzer used when ``analyzer.simulate`` is true."""
+
+    speed_factor: Positive = 20.0
+    transport: Literal["tcp", "rtu"] = "tcp"
+    analysis_seconds: NonNegative = 2.0
+    #: Faults active from the start, e.g. ``{error_state: 7}`` (see analyzer_sim).
+    faults: dict[str, int | None] = {}
 
 
 class DeckPoint(Section):
@@ -79,7 +92,7 @@ class DeckPoint(Section):
 class RobotConfig(Section):
     driver: str = "grbl"
     simulate: bool = True
-    simulator: SimulatorConfig = SimulatorConfig(speed_factor=20.0)
+    simulator: RobotSimulatorConfig = RobotSimulatorConfig()
     port: str = "/dev/ttyUSB0"
     baudrate: Annotated[int, Field(gt=0)] = 115200
     timeout_s: Positive = 2.0
@@ -107,7 +120,7 @@ class RobotConfig(Section):
 class AnalyzerConfig(Section):
     driver: str = "modbus"
     simulate: bool = True
-    simulator: SimulatorConfig = SimulatorConfig(speed_factor=20.0, transport="tcp")
+    simulator: AnalyzerSimulatorConfig = AnalyzerSimulatorConfig()
     transport: Literal["tcp", "rtu"] = "tcp"
     host: str = "127.0.0.1"
     port: Annotated[int, Field(ge=0, le=65535)] = 502

@@ -35,8 +35,6 @@ from labauto.plugin_manager import Plugins
 from labauto.store import Store
 from labauto.store.states import PickState, RunState
 
-IN_FLIGHT = (PickState.MOVING, PickState.PICKED, PickState.DELIVERED)
-
 
 class Reporter(Protocol):
     """Receives every run event as it happens (the CLI shows progress with it)."""
@@ -138,8 +136,12 @@ class ColonyPickingRun:
     def event(self, kind: str, message: str, source: str = "orchestrator", **data: Any) -> None:
         """Record one event in the audit log and tell the reporter."""
         self.store.record_event(self.run_id, kind, message, source=source, data=data or None)
+        self._notify(kind, message, data)
+
+    def _notify(self, kind: str, message: str, data: dict[str, Any] | None = None) -> None:
+        """Tell the reporter only: for changes the store already audits (run and pick states)."""
         if self.reporter is not None:
-            self.reporter.on_event(kind, message, data)
+            self.reporter.on_event(kind, message, data or {})
 
     def exchange_logger(self, device: str) -> Callable[[str, str], None]:
         """A callback for a driver's ``on_exchange``: one event per line sent or received."""
@@ -162,8 +164,9 @@ class ColonyPickingRun:
     def execute(self) -> RunOutcome:
         """Run (or resume) to a final state: succeeded, stopped or failed."""
         self._flag_unknown_picks()
-        self.store.set_run_state(self.run_id, RunState.RUNNING)
-        self.event("run.state", "running")
+        if self.store.get_run(self.run_id).state == RunState.STOPPING:
+            return self._finish(RunState.STOPPED, "stopped before a restart; stop completed")
+        self._set_run_state(RunState.RUNNING)
         final, error = RunState.SUCCEEDED, None
         try:
             calibration = calibration_from_config(self.config)
@@ -188,13 +191,15 @@ class ColonyPickingRun:
             self._flag_unknown_picks()
         return self._finish(final, error)
 
+    def _set_run_state(self, state: RunState, error: str | None = None) -> None:
+        self.store.set_run_state(self.run_id, state, error=error)
+        self._notify("run.state", state.value + (f": {error}" if error else ""))
+
     def _finish(self, final: RunState, error: str | None) -> RunOutcome:
-        if final is not RunState.SUCCEEDED:
-            self.store.set_run_state(self.run_id, RunState.STOPPING)
-        self.store.set_run_state(self.run_id, final, error=error)
-        self.event("run.state", final.value + (f": {error}" if error else ""))
-        summary = self.store.run_summary(self.run_id)
-        picks = dict(summary.picks_by_state)
+        if final is RunState.STOPPED and self.store.get_run(self.run_id).state != "stopping":
+            self._set_run_state(RunState.STOPPING)
+        self._set_run_state(final, error)
+        picks = {str(k): v for k, v in self.store.run_summary(self.run_id).picks_by_state.items()}
         self._hook(
             "labauto_run_finished", run_id=self.run_id, state=final.value, summary={"picks": picks}
         )
@@ -202,9 +207,7 @@ class ColonyPickingRun:
 
     def _checkpoint(self) -> None:
         def on_pause(waiting: bool) -> None:
-            state = RunState.PAUSED if waiting else RunState.RUNNING
-            self.store.set_run_state(self.run_id, state)
-            self.event("run.state", state.value)
+            self._set_run_state(RunState.PAUSED if waiting else RunState.RUNNING)
 
         self.control.checkpoint(on_pause)
 
@@ -221,26 +224,26 @@ class ColonyPickingRun:
         )
 
     def _cleanup(self) -> None:
-        """After a stop: tool off and head up, so the deck is safe to reach into."""
+        """After a stop: tool off and head up at its place, so the deck is safe to reach into."""
+        robot = self.workcell.robot
         try:
-            self.workcell.robot.tool_off()
-            self.workcell.robot.raise_to_safe_height()
+            robot.tool_off()
+            x, y, _z = robot.status().machine_position or robot.status().work_position
+            robot.move_to(x, y)
+            self.event("run.cleanup", f"tool off, head raised at ({x:.1f}, {y:.1f}) mm")
         except Exception as exc:
             self.event("run.cleanup", f"cleanup incomplete: {exc}")
 
     def _flag_unknown_picks(self) -> None:
-        for pick in self.store.picks_in_flight(self.run_id):
-            self.store.set_pick_state(
-                pick.id,
-                PickState.UNKNOWN,
-                needs_attention=True,
-                error=f"outcome unknown: interrupted while {pick.state}",
-            )
-            self.event(
-                "pick.unknown",
-                f"pick {pick.id} (colony {pick.colony_id}) was {pick.state} when the run was "
-                "interrupted: flagged for the operator, not repeated",
-                pick_id=pick.id,
+        """Settle picks interrupted in flight: flagged for the operator, never repeated."""
+        for pick in self.store.flag_picks_in_flight(
+            self.run_id, reason="outcome unknown: the run was interrupted during this pick"
+        ):
+            self._notify(
+                f"pick.{pick.state}",
+                f"pick {pick.id} (colony {pick.colony_id}) "
+                f"was interrupted: now {pick.state}"
+                + (", flagged for the operator" if pick.needs_attention else ""),
             )
 
     # -- one plate ---------------------------------------------------------------------------
@@ -353,7 +356,9 @@ class ColonyPickingRun:
     def _pick_failed(self, pick: Any, exc: DeviceError) -> None:
         """Mark the pick failed and bring the device that failed back, or fail the run."""
         self.store.set_pick_state(pick.id, PickState.FAILED, error=str(exc))
-        self.event("pick.failed", f"pick {pick.id} failed: {exc}", pick_id=pick.id, error=str(exc))
+        self._notify(
+            "pick.failed", f"pick {pick.id} failed: {exc}", pick_id=pick.id, error=str(exc)
+        )
         device = self.workcell.robot if exc.device == "robot" else self.workcell.analyzer
         device.recover()
         self.event(

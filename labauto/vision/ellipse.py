@@ -47,9 +47,7 @@ class Ellipse:
         a, b = self.axes
         x = a * np.cos(t)
         y = b * np.sin(t)
-        return np.column_stack(
-            (self.center[0] + c * x - s * y, self.center[1] + s * x + c * y)
-        )
+        return np.column_stack((self.center[0] + c * x - s * y, self.center[1] + s * x + c * y))
 
     def to_dict(self) -> dict:
         """Return the JSON form ``{"center": [x, y], "axes": [a, b], "angle": deg}``."""

@@ -1,0 +1,137 @@
+"""The run and pick state machines, and the colony classes.
+
+Pure Python, no database: the repository checks every state change against the tables here, and
+the orchestrator may use them to decide what to do next.
+
+Run states (the style of Opentrons' engine and Bluesky's RunEngine)::
+
+    idle -> running -> paused -> running          (pause at a safe checkpoint, resume)
+            running -> stopping -> stopped        (stop with cleanup; also from paused)
+            running -> succeeded
+            running -> running                    (resume a run that crashed while running)
+    idle | running | paused | stopping -> failed  (an error can happen in any live state)
+
+Choice beyond the brief: ``failed`` is reachable from every unfinished state (not only from
+``running``), so a fault during a pause, during cleanup or before the start can be recorded as
+what it is. ``stopped``, ``failed`` and ``succeeded`` are final.
+
+Pick states::
+
+    planned -> moving -> picked -> delivered -> analyzed
+    planned | moving | picked | delivered | unknown -> failed
+    moving | picked | delivered -> unknown        (crash recovery: the outcome is not known)
+    unknown -> planned                            (the operator confirmed the colony is untouched)
+
+Choice beyond the brief: ``unknown -> planned`` lets the operator release a flagged pick for a
+retry after checking the plate; nothing else leaves ``unknown`` except ``failed``. ``analyzed``
+and ``failed`` are final.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+
+class RunState(StrEnum):
+    """State of a run. Stored as its lowercase string value."""
+
+    IDLE = "idle"
+    RUNNING = "running"
+    PAUSED = "paused"
+    STOPPING = "stopping"
+    STOPPED = "stopped"
+    FAILED = "failed"
+    SUCCEEDED = "succeeded"
+
+
+class PickState(StrEnum):
+    """State of one pick (one colony taken to the analyzer). Stored as its string value."""
+
+    PLANNED = "planned"
+    MOVING = "moving"
+    PICKED = "picked"
+    DELIVERED = "delivered"
+    ANALYZED = "analyzed"
+    FAILED = "failed"
+    UNKNOWN = "unknown"
+
+
+class ColonyClass(StrEnum):
+    """Class of a colony: an authentic single colony, merged colonies, or a mixed colony."""
+
+    AUTHENTIC = "authentic"
+    MERGED = "merged"
+    MIXED = "mixed"
+
+
+RUN_TRANSITIONS: dict[RunState, frozenset[RunState]] = {
+    RunState.IDLE: frozenset({RunState.RUNNING, RunState.FAILED}),
+    RunState.RUNNING: frozenset(
+        {
+            RunState.RUNNING,  # resume after a crash
+            RunState.PAUSED,
+            RunState.STOPPING,
+            RunState.FAILED,
+            RunState.SUCCEEDED,
+        }
+    ),
+    RunState.PAUSED: frozenset({RunState.RUNNING, RunState.STOPPING, RunState.FAILED}),
+    RunState.STOPPING: frozenset({RunState.STOPPED, RunState.FAILED}),
+    RunState.STOPPED: frozenset(),
+    RunState.FAILED: frozenset(),
+    RunState.SUCCEEDED: frozenset(),
+}
+"""For each run state, the states it may move to."""
+
+RUN_FINAL_STATES: frozenset[RunState] = frozenset(
+    s for s, nxt in RUN_TRANSITIONS.items() if not nxt
+)
+"""Run states a run never leaves: stopped, failed, succeeded."""
+
+PICK_TRANSITIONS: dict[PickState, frozenset[PickState]] = {
+    PickState.PLANNED: frozenset({PickState.MOVING, PickState.FAILED}),
+    PickState.MOVING: frozenset({PickState.PICKED, PickState.FAILED, PickState.UNKNOWN}),
+    PickState.PICKED: frozenset({PickState.DELIVERED, PickState.FAILED, PickState.UNKNOWN}),
+    PickState.DELIVERED: frozenset({PickState.ANALYZED, PickState.FAILED, PickState.UNKNOWN}),
+    PickState.UNKNOWN: frozenset({PickState.FAILED, PickState.PLANNED}),
+    PickState.ANALYZED: frozenset(),
+    PickState.FAILED: frozenset(),
+}
+"""For each pick state, the states it may move to."""
+
+PICKS_IN_FLIGHT: frozenset[PickState] = frozenset(
+    {PickState.MOVING, PickState.PICKED, PickState.DELIVERED}
+)
+"""Pick states in which a colony has been touched but its probe has not reached the analyzer."""
+
+
+def can_transition_run(current: RunState | str, new: RunState | str) -> bool:
+    """Return whether a run may move from ``current`` to ``new``.
+
+    Parameters
+    ----------
+    current, new : RunState or str
+        Run states (enum members or their string values).
+
+    Raises
+    ------
+    ValueError
+        If either value is not a run state.
+    """
+    return RunState(new) in RUN_TRANSITIONS[RunState(current)]
+
+
+def can_transition_pick(current: PickState | str, new: PickState | str) -> bool:
+    """Return whether a pick may move from ``current`` to ``new``.
+
+    Parameters
+    ----------
+    current, new : PickState or str
+        Pick states (enum members or their string values).
+
+    Raises
+    ------
+    ValueError
+        If either value is not a pick state.
+    """
+    return PickState(new) in PICK_TRANSITIONS[PickState(current)]

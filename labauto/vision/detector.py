@@ -1,0 +1,315 @@
+"""The DES detector of Teutsch et al.: contours, shape angle, shape label and ellipse fit.
+
+Pipeline (sections 3.1-3.2 of the paper):
+
+1. contours, either from the colour Canny detector (``method="canny"``: eq. 2 colour gradient,
+   hysteresis, ordered edge linking, sub-pixel refinement) or from the adaptive colour
+   segmentation (``method="color"``: eq. 1, boundary tracing in the 8-neighbourhood);
+2. the shape angle D_alpha (eq. 3) of every contour, its centroid and the centroid-inside test;
+3. a DES is a contour whose centroid is inside and whose D_alpha is below a threshold;
+4. a shape label for every object (harmonic analysis) and a geometric ellipse fit for every DES.
+
+Coordinates: pixels, origin at the centre of the top-left pixel, x right, y down.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from labauto.vision.contours import Contours, canny_contours, color_contours
+from labauto.vision.ellipse import Ellipse
+from labauto.vision.gradient import as_uint8_image
+from labauto.vision.shape_angle import (
+    DEFAULT_DES_THRESHOLD_DEG,
+    DEFAULT_MAX_GAP_FRACTION,
+    shape_angles,
+)
+
+try:  # V2's modules (shape label, ellipse fit)
+    from labauto.vision.harmonics import classify_shape
+except ImportError:  # pragma: no cover - TODO(V2): remove once harmonics.py is in place
+    classify_shape = None
+try:
+    from labauto.vision.ellipse_fit import fit_ellipse_geometric
+except ImportError:  # pragma: no cover - TODO(V2): remove once ellipse_fit.py is in place
+    fit_ellipse_geometric = None
+
+#: Shape label given when classification is disabled or impossible.
+UNKNOWN_SHAPE = "unknown"
+
+
+@dataclass(frozen=True)
+class DetectorParams:
+    """Every tunable of the detector, with defaults for 8-bit images of colonies or markers.
+
+    Attributes
+    ----------
+    method : str
+        ``"canny"`` (colour Canny, default) or ``"color"`` (adaptive colour segmentation).
+    blur_sigma : float
+        Gaussian blur (pixels) before the gradient; 0 disables it.
+    canny_low, canny_high : float
+        Hysteresis thresholds on the L2 colour-gradient magnitude of a 3x3 Sobel (a step of
+        contrast C grey levels gives a magnitude of about 4 C before blurring).
+    color_threshold : float
+        ``t`` of eq. 1: a pixel is foreground when its (weighted) summed squared deviation from
+        the background mean exceeds ``t`` (grey levels squared).
+    channel_weights : tuple of float or None
+        Per-channel weights of eq. 1 (B, G, R order, as the image); None means all 1.
+    min_contour_length, max_contour_length : int
+        Contours with fewer or more points are rejected (paper: "too short" / "very long").
+    des_threshold_deg : float
+        D_alpha threshold (degrees) under which a contour with its centroid inside is a DES
+        (60: ellipses down to 1:4, see :mod:`labauto.vision.shape_angle`).
+    max_gap_fraction : float
+        Largest missing share of the outline of a DES (chord / (length + chord)).
+    statistic : str
+        ``"median"`` (default, the paper's robust choice) or ``"mean"``.
+    fit_ellipses : bool
+        Fit an ellipse (geometric, orthogonal distances) to every DES.
+    subpixel : bool
+        Refine Canny edge points to sub-pixel precision.
+    classify : bool
+        Give every object a shape label (harmonic analysis); ``"unknown"`` when disabled.
+    """
+
+    method: str = "canny"
+    blur_sigma: float = 0.7
+    canny_low: float = 40.0
+    canny_high: float = 100.0
+    color_threshold: float = 900.0
+    channel_weights: tuple[float, float, float] | None = None
+    min_contour_length: int = 20
+    max_contour_length: int = 10000
+    des_threshold_deg: float = DEFAULT_DES_THRESHOLD_DEG
+    max_gap_fraction: float = DEFAULT_MAX_GAP_FRACTION
+    statistic: str = "median"
+    fit_ellipses: bool = True
+    subpixel: bool = True
+    classify: bool = True
+
+
+@dataclass
+class DetectedObject:
+    """One contour found in the image.
+
+    ``points`` is the (n, 2) float array of contour points ``(x, y)``; it is not part of the
+    JSON form.
+    """
+
+    id: int
+    centroid: tuple[float, float]
+    n_points: int
+    closed: bool
+    d_alpha_median: float
+    d_alpha_mean: float
+    centroid_inside: bool
+    is_des: bool
+    shape: str
+    ellipse: Ellipse | None
+    points: np.ndarray = field(repr=False)
+    area_px: float = 0.0
+    descriptors: dict | None = None
+
+    def to_dict(self) -> dict:
+        """Return the JSON form (no points)."""
+        return {
+            "id": int(self.id),
+            "centroid": [float(self.centroid[0]), float(self.centroid[1])],
+            "n_points": int(self.n_points),
+            "closed": bool(self.closed),
+            "d_alpha_median": float(self.d_alpha_median),
+            "d_alpha_mean": float(self.d_alpha_mean),
+            "centroid_inside": bool(self.centroid_inside),
+            "is_des": bool(self.is_des),
+            "shape": self.shape,
+            "ellipse": None if self.ellipse is None else self.ellipse.to_dict(),
+        }
+
+
+@dataclass
+class DetectionResult:
+    """All objects of one image and the time the detection took."""
+
+    width: int
+    height: int
+    method: str
+    timing_ms: float
+    objects: list[DetectedObject]
+
+    def to_dict(self) -> dict:
+        """Return ``{"width", "height", "method", "timing_ms", "objects": [...]}``."""
+        return {
+            "width": int(self.width),
+            "height": int(self.height),
+            "method": self.method,
+            "timing_ms": float(self.timing_ms),
+            "objects": [obj.to_dict() for obj in self.objects],
+        }
+
+    @property
+    def des(self) -> list[DetectedObject]:
+        """The objects that are DES."""
+        return [obj for obj in self.objects if obj.is_des]
+
+
+def detect(image: np.ndarray, params: DetectorParams = DetectorParams()) -> DetectionResult:
+    """Find contours in ``image`` and tell deformed elliptic shapes (DES) from the rest.
+
+    Parameters
+    ----------
+    image : np.ndarray
+        HxW grey or HxWx3 colour (BGR, as ``cv2.imread`` gives) image, uint8 or float
+        (float images are taken on a 0-255 scale).
+    params : DetectorParams
+        Tunables.
+
+    Returns
+    -------
+    DetectionResult
+
+    Raises
+    ------
+    ValueError
+        If the image is empty, has the wrong number of dimensions or channels, or an unsupported
+        dtype, or a parameter is out of range.
+    """
+    start = time.perf_counter()
+    validate_params(params)
+    img = as_uint8_image(image)
+    contours = extract_contours(img, params)
+    objects = _objects(contours, params)
+    elapsed_ms = (time.perf_counter() - start) * 1e3
+    h, w = img.shape[:2]
+    return DetectionResult(w, h, params.method, elapsed_ms, objects)
+
+
+def validate_params(params: DetectorParams) -> None:
+    """Raise ValueError naming the first out-of-range field of ``params``."""
+    if not isinstance(params, DetectorParams):
+        raise ValueError(f"params must be a DetectorParams, got {type(params).__name__}")
+    if params.method not in ("canny", "color"):
+        raise ValueError(f"method must be 'canny' or 'color', got {params.method!r}")
+    if params.statistic not in ("median", "mean"):
+        raise ValueError(f"statistic must be 'median' or 'mean', got {params.statistic!r}")
+    if params.blur_sigma < 0:
+        raise ValueError(f"blur_sigma must be >= 0, got {params.blur_sigma}")
+    if not 0 <= params.canny_low <= params.canny_high:
+        raise ValueError(
+            f"need 0 <= canny_low <= canny_high, got {params.canny_low}, {params.canny_high}"
+        )
+    if params.color_threshold < 0:
+        raise ValueError(f"color_threshold must be >= 0, got {params.color_threshold}")
+    if params.channel_weights is not None and (
+        len(params.channel_weights) != 3 or min(params.channel_weights) < 0
+    ):
+        raise ValueError(f"channel_weights must be 3 values >= 0, got {params.channel_weights}")
+    if not 3 <= params.min_contour_length <= params.max_contour_length:
+        raise ValueError(
+            "need 3 <= min_contour_length <= max_contour_length, got "
+            f"{params.min_contour_length}, {params.max_contour_length}"
+        )
+    if not 0 <= params.max_gap_fraction <= 1:
+        raise ValueError(f"max_gap_fraction must be in [0, 1], got {params.max_gap_fraction}")
+    if not 0 < params.des_threshold_deg <= 90:
+        raise ValueError(f"des_threshold_deg must be in (0, 90], got {params.des_threshold_deg}")
+
+
+def extract_contours(image: np.ndarray, params: DetectorParams = DetectorParams()) -> Contours:
+    """Contours of a validated uint8 image by ``params.method`` (step 1 of :func:`detect`)."""
+    if params.method == "canny":
+        return canny_contours(
+            image,
+            blur_sigma=params.blur_sigma,
+            low=params.canny_low,
+            high=params.canny_high,
+            min_length=params.min_contour_length,
+            max_length=params.max_contour_length,
+            subpixel=params.subpixel,
+        )
+    weights = params.channel_weights
+    if weights is not None and image.ndim == 2:
+        weights = (float(np.mean(weights)),)  # one channel: the weight only scales t
+    return color_contours(
+        image,
+        threshold=params.color_threshold,
+        channel_weights=weights,
+        min_length=params.min_contour_length,
+        max_length=params.max_contour_length,
+    )
+
+
+def _label(
+    points: np.ndarray,
+    d_alpha: float,
+    inside: bool,
+    closed: bool,
+    centroid: tuple[float, float],
+    params: DetectorParams,
+) -> str:
+    if not params.classify or classify_shape is None:
+        return UNKNOWN_SHAPE
+    try:
+        return classify_shape(
+            points,
+            d_alpha=d_alpha,
+            centroid_inside=inside,
+            closed=closed,
+            des_threshold_deg=params.des_threshold_deg,
+            centroid=centroid,
+        )
+    except ValueError:  # degenerate contour (e.g. all points on a line)
+        return UNKNOWN_SHAPE
+
+
+def _fit(points: np.ndarray) -> Ellipse | None:
+    if fit_ellipse_geometric is None or points.shape[0] < 5:
+        return None
+    try:
+        fit = fit_ellipse_geometric(points)
+    except ValueError:  # degenerate point set
+        return None
+    return fit.ellipse
+
+
+def _objects(contours: Contours, params: DetectorParams) -> list[DetectedObject]:
+    if len(contours) == 0:
+        return []
+    angles = shape_angles(contours.points, contours.gradients, contours.offsets, contours.closed)
+    des = angles.is_des(params.des_threshold_deg, params.statistic, params.max_gap_fraction)
+    d_alpha = angles.statistic(params.statistic)
+    offsets = contours.offsets.tolist()
+    centroids = angles.centroid.tolist()
+    medians, means = angles.d_alpha_median.tolist(), angles.d_alpha_mean.tolist()
+    inside, closed, areas = (
+        angles.centroid_inside.tolist(),
+        contours.closed.tolist(),
+        angles.area.tolist(),
+    )
+    objects = []
+    for k in range(len(contours)):
+        points = contours.points[offsets[k] : offsets[k + 1]]
+        centroid = (centroids[k][0], centroids[k][1])
+        is_des = bool(des[k])
+        shape = _label(points, float(d_alpha[k]), inside[k], closed[k], centroid, params)
+        ellipse = _fit(points) if is_des and params.fit_ellipses else None
+        objects.append(
+            DetectedObject(
+                id=k,
+                centroid=centroid,
+                n_points=offsets[k + 1] - offsets[k],
+                closed=closed[k],
+                d_alpha_median=medians[k],
+                d_alpha_mean=means[k],
+                centroid_inside=inside[k],
+                is_des=is_des,
+                shape=shape,
+                ellipse=ellipse,
+                points=points,
+                area_px=areas[k],
+            )
+        )
+    return objects

@@ -1,0 +1,111 @@
+"""Built-in plugin: device drivers for the workcell, real or simulated.
+
+* robot ``grbl`` — a GRBL 1.1 gantry over any pyserial URL (``labauto.drivers.grbl``);
+* analyzer ``modbus`` — a Modbus TCP/RTU analyzer with a YAML register map
+  (``labauto.drivers.analyzer``);
+* camera ``folder`` (image files or a folder; ``samples`` for the bundled plates) and
+  ``simulated`` (freshly generated synthetic plates).
+
+With ``simulate: true`` in its config section, a robot or analyzer factory first starts the
+simulated device (a GRBL gantry behind a pseudo-terminal or TCP socket, a pymodbus server on
+127.0.0.1 or an RTU server on a pseudo-terminal) and points the real driver at it: only the
+transport's far end is simulated, never the driver. Closing the device stops its simulator.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from labauto.drivers.analyzer import Analyzer
+from labauto.drivers.analyzer_sim import SimulatedAnalyzer
+from labauto.drivers.camera import FolderCamera, SimulatedCamera
+from labauto.drivers.grbl import GrblRobot
+from labauto.drivers.grbl_protocol import TravelLimits
+from labauto.drivers.grbl_sim import SimulatedGantry
+from labauto.hookspecs import hookimpl
+
+
+class Simulated:
+    """A real driver talking to a simulated device it owns; ``close()`` stops both."""
+
+    def __init__(self, device: Any, simulator: Any) -> None:
+        self.device = device
+        self.simulator = simulator
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.device, name)
+
+    def close(self) -> None:
+        try:
+            self.device.close()
+        finally:
+            self.simulator.stop()
+
+
+def make_grbl_robot(section: Any) -> GrblRobot | Simulated:
+    """A ``GrblRobot`` from a ``robot`` config section (with its simulator if simulated)."""
+    limits = TravelLimits(x=section.limits_x_mm, y=section.limits_y_mm, z=section.limits_z_mm)
+    options = dict(
+        baudrate=section.baudrate,
+        timeout=section.timeout_s,
+        limits=limits,
+        safe_z=section.safe_z_mm,
+        travel_feed=section.travel_feed,
+        z_feed=section.z_feed,
+        motion_timeout=section.motion_timeout_s,
+    )
+    if not section.simulate:
+        return GrblRobot(section.port, **options)
+    sim = section.simulator
+    gantry = SimulatedGantry(limits, speed_factor=sim.speed_factor, faults=sim.faults)
+    url = gantry.start_pty() if sim.transport == "pty" else gantry.start_tcp()
+    return Simulated(GrblRobot(url, **options), gantry)
+
+
+def make_modbus_analyzer(section: Any) -> Analyzer | Simulated:
+    """An ``Analyzer`` from an ``analyzer`` config section (with its simulator if simulated)."""
+    options = dict(
+        register_map=section.register_map,
+        timeout=section.timeout_s,
+        unit_id=section.unit,
+        baudrate=section.baudrate,
+    )
+    if not section.simulate:
+        return Analyzer(
+            section.transport,
+            host=section.host,
+            port=section.port,
+            serial_port=section.serial_port,
+            **options,
+        )
+    sim = section.simulator
+    server = SimulatedAnalyzer(
+        section.register_map,
+        analysis_seconds=sim.analysis_seconds,
+        speed_factor=sim.speed_factor,
+        faults=sim.faults,
+    )
+    if sim.transport == "tcp":
+        host, port = server.start_tcp("127.0.0.1")
+        device = Analyzer("tcp", host=host, port=port, **options)
+    else:
+        device = Analyzer("rtu", serial_port=server.start_rtu(), **options)
+    return Simulated(device, server)
+
+
+def make_folder_camera(section: Any) -> FolderCamera:
+    """A ``FolderCamera`` from a ``camera`` config section."""
+    return FolderCamera(section.path, section.pattern)
+
+
+def make_simulated_camera(section: Any) -> SimulatedCamera:
+    """A camera of freshly generated synthetic plates (``camera.count`` of them)."""
+    return SimulatedCamera(count=section.count)
+
+
+@hookimpl
+def labauto_register_drivers(register: Any) -> None:
+    register("robot", "grbl", make_grbl_robot)
+    register("analyzer", "modbus", make_modbus_analyzer)
+    register("camera", "folder", make_folder_camera)
+    register("camera", "simulated", make_simulated_camera)
