@@ -1,0 +1,306 @@
+"""Driver for a Modbus analyzer (TCP or RTU) described by a YAML register map.
+
+Typical use::
+
+    with Analyzer("tcp", host="10.0.0.7", port=502) as analyzer:
+        result = analyzer.analyze("S-0001", timeout=120)   # {"od600": 0.71, "ph": 7.02, ...}
+
+Behaviour and choices:
+
+* ``connect()`` opens the link and reads the state once, so a connected driver has seen the
+  analyzer answer. No automatic retries: every failure is raised, and after any failure
+  ``reconnect()`` (close + connect) brings the driver back.
+* Errors: a Modbus exception reply raises the ``ModbusExceptionReply`` subclass for its code
+  (e.g. ``ModbusServerDeviceBusy`` for a load while busy); no reply -> ``DeviceTimeout``;
+  dropped connection -> ``DeviceDisconnected``; a state code the map does not know ->
+  ``UnexpectedReply``; the analyzer's error state -> ``AnalyzerError`` with its error code;
+  a sample id that does not fit the map -> ``DeviceRefused`` before anything is sent.
+* ``wait_done()`` polls the state every ``poll_interval`` seconds: done returns, error raises,
+  idle and busy keep waiting (an analyzer may show idle for a moment after start).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Literal
+
+from .analyzer_map import (
+    AnalyzerMap,
+    ReadSpan,
+    RegisterField,
+    Value,
+    decode_spans,
+    decode_value,
+    encode_value,
+    load_map,
+    read_spans,
+)
+from .errors import AnalyzerError, DeviceRefused, DeviceTimeout, UnexpectedReply
+from .modbus_adapter import ExchangeCallback, ModbusClientLink
+
+
+class Analyzer:
+    """A Modbus analyzer: load a sample, start, wait, read the named results.
+
+    Parameters
+    ----------
+    transport : {"tcp", "rtu"}
+        Modbus TCP or Modbus RTU over a serial line.
+    host, port : str, int
+        TCP: the analyzer's address (default port 502).
+    serial_port : str
+        RTU: the serial device path or pyserial URL (e.g. ``/dev/ttyUSB0``).
+    baudrate : int
+        RTU line speed (8N1).
+    unit_id : int, optional
+        Modbus unit / device id; default: ``device.unit_id`` of the map.
+    register_map : AnalyzerMap or path, optional
+        The register map; default: ``drivers/analyzer_map.yaml``.
+    timeout : float
+        Seconds to wait for each Modbus reply.
+    poll_interval : float, optional
+        Seconds between state reads in :meth:`wait_done`; default from the map's timing.
+    name : str
+        Device name used in errors and logs.
+    on_exchange : callable, optional
+        ``on_exchange(direction, text)`` for each request (``"send"``) and outcome (``"recv"``).
+    """
+
+    def __init__(
+        self,
+        transport: Literal["tcp", "rtu"] = "tcp",
+        *,
+        host: str = "127.0.0.1",
+        port: int = 502,
+        serial_port: str | None = None,
+        baudrate: int = 19200,
+        unit_id: int | None = None,
+        register_map: AnalyzerMap | str | Path | None = None,
+        timeout: float = 1.0,
+        poll_interval: float | None = None,
+        name: str = "analyzer",
+        on_exchange: ExchangeCallback | None = None,
+    ) -> None:
+        self.map = register_map if isinstance(register_map, AnalyzerMap) else load_map(register_map)
+        self.name = name
+        self.unit_id = self.map.unit_id if unit_id is None else unit_id
+        if not 0 <= self.unit_id <= 255:
+            raise ValueError(f"unit_id must be 0..255, got {self.unit_id!r}")
+        self.poll_interval = self.map.poll_interval_s if poll_interval is None else poll_interval
+        if self.poll_interval <= 0:
+            raise ValueError(f"poll_interval must be > 0 seconds, got {self.poll_interval!r}")
+        self._link = ModbusClientLink(
+            transport,
+            host=host,
+            port=port,
+            serial_port=serial_port,
+            baudrate=baudrate,
+            timeout=timeout,
+            device=name,
+            on_exchange=on_exchange,
+        )
+        self._result_spans = read_spans(self.map.results)
+        self._identification_spans = read_spans(self.map.identification)
+
+    @property
+    def endpoint(self) -> str:
+        """Where the analyzer is, e.g. ``tcp 127.0.0.1:5020``."""
+        return self._link.endpoint
+
+    # -- connection ---------------------------------------------------------------------------
+    def connect(self) -> None:
+        """Open the connection and check that the analyzer answers (reads its state).
+
+        Raises
+        ------
+        DeviceDisconnected, DeviceTimeout, ModbusExceptionReply, UnexpectedReply
+        """
+        self._link.connect()
+        try:
+            self.state()
+        except BaseException:
+            self._link.close()
+            raise
+
+    def close(self) -> None:
+        """Close the connection (idempotent)."""
+        self._link.close()
+
+    def reconnect(self) -> None:
+        """Close and connect again: the way back after any failure."""
+        self.close()
+        self.connect()
+
+    def __enter__(self) -> Analyzer:
+        self.connect()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    # -- commands -------------------------------------------------------------------------------
+    def state(self) -> str:
+        """The analyzer's state: ``"idle"``, ``"busy"``, ``"done"`` or ``"error"``.
+
+        Raises
+        ------
+        UnexpectedReply
+            The state register holds a code the map does not know.
+        """
+        code = self._read_field(self.map.state.field, "state")
+        name = self.map.state.name_of(int(code))
+        if name is None:
+            raise UnexpectedReply(
+                f"state register holds {code}, which the map {self.map.source} does not know",
+                device=self.name,
+            )
+        return name
+
+    def error_code(self) -> int:
+        """The analyzer's error code register (meaningful in the error state)."""
+        return int(self._read_field(self.map.error_code, "error code"))
+
+    def load_sample(self, sample_id: str | int) -> None:
+        """Write the sample id, then the ``load`` command.
+
+        Raises
+        ------
+        DeviceRefused
+            The id does not fit the map's sample id field (too long, not ASCII, wrong kind).
+        ModbusServerDeviceBusy
+            The analyzer is busy (as the simulated one answers).
+        """
+        field = self.map.sample_id
+        try:
+            registers = encode_value(field, sample_id)
+        except ValueError as exc:
+            raise DeviceRefused(f"sample id not sent: {exc}", device=self.name) from None
+        self._link.write_registers(
+            field.address, registers, self.unit_id, label=f"sample id {sample_id!r}"
+        )
+        self.command("load")
+
+    def start(self) -> None:
+        """Send the ``start`` command."""
+        self.command("start")
+
+    def abort(self) -> None:
+        """Send the ``abort`` command."""
+        self.command("abort")
+
+    def reset(self) -> None:
+        """Send the ``reset`` command (leaves the error state)."""
+        self.command("reset")
+
+    def command(self, name: str) -> None:
+        """Write the code of command ``name`` (any command the map defines)."""
+        try:
+            code = self.map.command.code(name)
+        except KeyError as exc:
+            raise DeviceRefused(str(exc.args[0]), device=self.name) from None
+        self._link.write_registers(
+            self.map.command.field.address, [code], self.unit_id, label=f"command {name}"
+        )
+
+    def wait_done(self, timeout: float = 60.0) -> None:
+        """Poll the state until the analysis is done.
+
+        Parameters
+        ----------
+        timeout : float
+            Seconds to wait for the done state.
+
+        Raises
+        ------
+        AnalyzerError
+            The analyzer went to its error state (``code`` = its error code register).
+        DeviceTimeout
+            Not done within ``timeout`` (the message says the last state seen).
+        """
+        deadline = time.monotonic() + timeout
+        while True:
+            state = self.state()
+            if state == "done":
+                return
+            if state == "error":
+                code = self.error_code()
+                raise AnalyzerError(
+                    f"analysis failed with error code {code}", device=self.name, code=code
+                )
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise DeviceTimeout(
+                    f"analysis not done after {timeout:g} s (state {state})", device=self.name
+                )
+            time.sleep(min(self.poll_interval, remaining))
+
+    def read_result(self) -> dict[str, Value]:
+        """Read every result register: ``{name: value}`` in map order (scaled, decoded)."""
+        values = self._read_spans(self._result_spans, "results")
+        return {f.name: values[f.name] for f in self.map.results}
+
+    def analyze(self, sample_id: str | int, timeout: float = 60.0) -> dict[str, Value]:
+        """Load ``sample_id``, start, wait until done (at most ``timeout`` s), read the result."""
+        self.load_sample(sample_id)
+        self.start()
+        self.wait_done(timeout)
+        return self.read_result()
+
+    def identify(self) -> dict[str, Any]:
+        """What ``labauto devices check`` shows: endpoint, unit, state, error code, identity.
+
+        Keys: ``name``, ``endpoint``, ``unit_id``, ``model`` (the map's, unless the analyzer
+        reports its own in an identification register), ``state``, ``error_code``, and one key
+        per identification register of the map. Raises like :meth:`state` when there is no answer.
+        """
+        info: dict[str, Any] = {
+            "name": self.name,
+            "endpoint": self.endpoint,
+            "unit_id": self.unit_id,
+            "model": self.map.model,
+            "state": self.state(),
+            "error_code": self.error_code(),
+        }
+        info.update(self._read_spans(self._identification_spans, "identification"))
+        return info
+
+    # -- internals ------------------------------------------------------------------------------
+    def _read_field(self, field: RegisterField, label: str) -> Value:
+        registers = self._link.read_registers(
+            field.table,
+            field.address,
+            field.registers,
+            self.unit_id,
+            label=label,
+        )
+        return decode_value(field, registers)
+
+    def _read_spans(self, spans: list[ReadSpan], label: str) -> dict[str, Value]:
+        blocks = [
+            self._link.read_registers(
+                s.table,
+                s.address,
+                s.count,
+                self.unit_id,
+                label=label,
+            )
+            for s in spans
+        ]
+        return decode_spans(spans, blocks)
+
+
+def exchange_logger(sink: Callable[[str], None], name: str = "analyzer") -> ExchangeCallback:
+    """An ``on_exchange`` callback writing lines like ``analyzer > read input 0 unit 1``."""
+
+    def log(direction: str, text: str) -> None:
+        sink(f"{name} {'>' if direction == 'send' else '<'} {text}")
+
+    return log
