@@ -216,6 +216,7 @@ def _describe(error: dict[str, Any]) -> str:
     }
     if kind in bounds:
         limit = next(iter(ctx.values()))
+        limit = f"{limit:g}" if isinstance(limit, float) else limit
         return f"expected a value {bounds[kind]} {limit}, got {got!r}"
     if kind == "literal_error":
         return f"expected {ctx.get('expected')}, got {got!r}"
@@ -380,5 +381,7 @@ def load_config(path: str | Path | None, environ: dict[str, str] | None = None) 
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{path}: not valid YAML{where}") from None
+        problem = getattr(exc, "problem", None)
+        detail = f": {problem}" if problem else ""
+        raise ConfigError(f"{path}: not valid YAML{where}{detail}") from None
     return parse_config(data, str(path), environ)

@@ -46,7 +46,7 @@ def test_defaults_describe_a_simulated_workcell():
         ("detector:\n  statistic: mode\n", "detector.statistic: expected 'median' or 'mean'"),
         ("picking:\n  order: random\n", "picking.order: expected 'largest'"),
         ("- a\n- b\n", "expected a mapping of sections, got list"),
-        ("robot: [1\n", "not valid YAML at line 1"),
+        ("robot: [1\n", "not valid YAML at line 2: expected ',' or ']'"),
     ],
 )
 def test_invalid_values_name_file_key_and_expectation(tmp_path, text, message):

@@ -13,7 +13,7 @@ import sys
 
 import numpy as np
 import pytest
-from labauto.synthetic.shapes import render_ellipse
+from labauto.synthetic.shapes import ellipse, render
 
 from labauto import hookspecs
 from labauto.plugin_manager import load_plugins
@@ -30,7 +30,8 @@ def plugins():
 
 @pytest.fixture()
 def scene() -> np.ndarray:
-    return render_ellipse((120, 100), center=(60.3, 50.7), axes=(30.0, 18.0), angle=20.0)
+    gray = render([ellipse((60.3, 50.7), (30.0, 18.0), 20.0)], 120, 100)
+    return np.dstack([gray, gray // 2, gray])
 
 
 def test_sample_plugin_loads_through_its_entry_point(plugins):
