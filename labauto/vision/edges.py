@@ -4,13 +4,13 @@ The paper combines Canny's hysteresis with a region growing that "collects all p
 contour with a known sorting". We get the same ordered chains without a Python loop over pixels:
 
 1. ``cv2.Canny(gx, gy, low, high, L2gradient=True)`` on our own colour gradient (eq. 2);
-2. ``cv2.findContours(..., RETR_CCOMP, CHAIN_APPROX_NONE)`` traces the outer boundary of every
+2. the edge pixels are thinned to minimal 8-connected chains (:func:`thin_edges`: Canny leaves
+   4-connected staircases that the tracer would meet only on its way back, out of order), then
+   ``cv2.findContours(..., RETR_CCOMP, CHAIN_APPROX_NONE)`` traces the outer boundary of every
    8-connected edge component (hole boundaries are dropped: they repeat the same thin edge);
 3. an open chain is traced out and back (A..B..A). We rotate such a trace to start at its first
    turnaround point (where the trace reverses, i.e. an end of the chain) and keep every pixel
-   once, at its first visit. Canny leaves 4-connected staircases whose corner pixels the tracer
-   meets only on the way back; such a pixel, first met between two revisits, is dropped (it
-   would land out of order, and the way out is already an 8-connected path). An open chain comes out ordered from one end to the
+   once, at its first visit. An open chain comes out ordered from one end to the
    other; a closed thin loop comes out once around (its outer trace). Components with more than
    two ends (branches) keep all their pixels, branches following each other, which is what the
    paper's region growing gives too.
@@ -46,6 +46,93 @@ def canny_edges(gx: np.ndarray, gy: np.ndarray, low: float, high: float) -> np.n
     return cv2.Canny(gx, gy, float(low), float(high), L2gradient=True)
 
 
+def _removable_table() -> np.ndarray:
+    """Which 3x3 neighbourhoods (by 8-bit neighbour code) make the centre pixel removable.
+
+    Bit k of the code is neighbour k in the ring order N, NE, E, SE, S, SW, W, NW. The centre is
+    removable when it has at least two neighbours (not a chain end), its neighbours form one
+    8-connected group without it (its removal disconnects nothing), and one of its 4-neighbours
+    is background (no hole is opened).
+    """
+    nb = ((np.arange(256)[:, None] >> np.arange(8)) & 1).astype(bool)  # (256, 8)
+    # ring neighbours k, k+1 touch; k, k+2 touch too when k is N, E, S or W (even k)
+    adjacent = np.zeros((8, 8), bool)
+    for k in range(8):
+        for step in (1, 2) if k % 2 == 0 else (1,):
+            j = (k + step) % 8
+            adjacent[k, j] = adjacent[j, k] = True
+    table = np.zeros(256, bool)
+    for code in range(256):
+        members = [int(k) for k in np.flatnonzero(nb[code])]
+        if len(members) < 2 or nb[code, 0::2].all():
+            continue
+        reached, frontier = {members[0]}, [members[0]]
+        while frontier:
+            k = frontier.pop()
+            for j in members:
+                if adjacent[k, j] and j not in reached:
+                    reached.add(j)
+                    frontier.append(j)
+        table[code] = len(reached) == len(members)
+    return table
+
+
+_REMOVABLE = _removable_table()
+#: (dy, dx) of the ring neighbours N, NE, E, SE, S, SW, W, NW
+_NEIGHBOURS = ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1))
+
+
+def thin_edges(edges: np.ndarray, max_iter: int = 2) -> np.ndarray:
+    """Thin an edge map to minimal 8-connected chains, working only on the edge pixels.
+
+    Canny leaves 4-connected staircases and short two-pixel-thick runs; a boundary trace then
+    meets some pixels only on its way back, which scrambles the order of the chain. We remove
+    every pixel whose neighbours stay 8-connected without it and that is not a chain end (see
+    :func:`_removable_table`). Pixels are decided in four checkerboard classes (x and y
+    parity): two pixels of one class are never neighbours, so a class is decided at once,
+    vectorised, without breaking a chain. The end of a two-pixel-thick run may lose a pixel
+    per pass.
+
+    Parameters
+    ----------
+    edges : np.ndarray
+        uint8 HxW map, nonzero on edges.
+    max_iter : int
+        Maximum number of passes over the four classes (Canny output: 1-2).
+
+    Returns
+    -------
+    np.ndarray
+        uint8 (H+2)x(W+2) 0/1 map: the thinned edges with a one-pixel zero border (pixel ``(x, y)``
+        of ``edges`` is at ``(x + 1, y + 1)``; pass ``offset=(-1, -1)`` to ``cv2.findContours``).
+    """
+    binary = cv2.threshold(edges, 0, 1, cv2.THRESH_BINARY)[1]
+    padded = cv2.copyMakeBorder(binary, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    flat = padded.ravel()
+    stride = padded.shape[1]
+    found = cv2.findNonZero(padded)  # faster than numpy on a sparse map
+    if found is None:
+        return padded
+    xy = found.reshape(-1, 2).astype(np.intp)
+    pixels = xy[:, 1] * stride + xy[:, 0]
+    neighbour_offsets = [dy * stride + dx for dy, dx in _NEIGHBOURS]
+    parity = ((pixels // stride) % 2) * 2 + (pixels % 2)
+    classes = [pixels[parity == c] for c in range(4)]
+    for _ in range(max_iter):
+        changed = False
+        for at in classes:
+            code = np.zeros(at.shape[0], np.uint8)
+            for bit, offset in enumerate(neighbour_offsets):
+                code |= flat[at + offset] << bit
+            remove = _REMOVABLE[code] & (flat[at] != 0)
+            if remove.any():
+                changed = True
+                flat[at[remove]] = 0
+        if not changed:
+            break
+    return padded
+
+
 def link_edges(
     edges: np.ndarray, min_length: int = 1, max_length: int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -65,7 +152,9 @@ def link_edges(
     offsets : np.ndarray
         (K + 1,) int64; chain k is ``points[offsets[k]:offsets[k + 1]]``.
     """
-    traces, hierarchy = cv2.findContours(edges, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+    traces, hierarchy = cv2.findContours(
+        thin_edges(edges), cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE, offset=(-1, -1)
+    )
     if not traces:
         return np.empty((0, 2), np.int32), np.zeros(1, np.int64)
     outer = hierarchy[0, :, 3] < 0
@@ -82,8 +171,7 @@ def traces_to_chains(
     A trace that visits most of its pixels twice (fewer than 3/4 distinct: an open chain traced
     out and back) is rotated to start at its first turnaround (``t[i - 1] == t[i + 1]``);
     closed loops keep their start (a one-pixel spur on a loop must not open it). Then only the
-    first visit of every pixel is kept, except isolated first visits between two revisits
-    (staircase corners met on the way back). See the module docstring.
+    first visit of every pixel is kept. See the module docstring.
 
     Parameters
     ----------
@@ -120,13 +208,7 @@ def traces_to_chains(
     rotation = np.where(first_turn == big, 0, first_turn)
     # position j of a rotated trace holds its old point (j + rotation) mod n
     order = starts[contour] + (local + rotation[contour]) % n
-    first = _first_visits(lin[order])
-    # a pixel first met between two revisits is a staircase corner seen on the way back
-    new_before = np.concatenate(([True], first[:-1]))
-    new_after = np.concatenate((first[1:], [True]))
-    new_before[starts] = True
-    new_after[starts[1:] - 1] = True
-    order = order[first & (new_before | new_after)]
+    order = order[_first_visits(lin[order])]
     contour = contour[order]
     counts = np.bincount(contour, minlength=len(traces))
     ok = counts >= min_length

@@ -86,7 +86,7 @@ def _channel_gradient(channel: np.ndarray, blur_sigma: float) -> tuple[np.ndarra
     return dx, dy, strength
 
 
-def color_gradient(image: np.ndarray, blur_sigma: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def color_gradient(image: np.ndarray, blur_sigma: float = 0.7) -> tuple[np.ndarray, np.ndarray]:
     """Per-pixel colour gradient: 3x3 Sobel of the channel with the largest gradient.
 
     Parameters

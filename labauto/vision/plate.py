@@ -7,40 +7,50 @@ species). Pure functions on arrays: no I/O.
 
 Pipeline and the choices it makes where the paper or the brief leave room:
 
-1. **Dish.** Hough circle on a grey image subsampled to ~256 px, refined at full resolution:
-   along 180 rays the first clear colour change outward from the agar (the meniscus / wall) is
-   located with sub-pixel interpolation and a circle is fitted to those points by least squares,
-   dropping the worst points in three rounds (labels, pen marks and colonies near the wall give
-   outliers). The usable area is the dish eroded by ``rim_margin_px``, or a configured circle or
-   polygon (``PlateParams.region``, taken as the usable area itself). Objects that touch the
-   border of the usable area are ignored (a colony cut by the rim margin cannot be picked).
-2. **Objects** (paper eq. 1). The background mean is estimated from the dish itself, locally: on
-   the dish subsampled by ``background_scale``, a median filter gives a first estimate, pixels
-   that deviate from it are masked out, and a normalised Gaussian convolution of the remaining
-   agar gives the background, which is resized back. A pixel is foreground when its summed
-   squared deviation from the local background over the B, G, R channels (optionally weighted)
-   exceeds ``color_threshold``. Contours are traced in the 8-neighbourhood (OpenCV).
-   The gradient at each contour point is taken on that deviation image (5x5 Sobel): it points
-   into every object whatever its colour. D_alpha, the centroid and the centroid-inside test are
-   computed for all contours at once by :func:`labauto.vision.shape_angle.shape_angles`.
+1. **Dish.** Hough circle on a grey image subsampled to ~128 px, refined at full resolution:
+   along 180 rays the agar's edge is where the colour first departs from the agar's by more than
+   18 grey levels (meniscus or wall), taken at half that first peak's height (sub-pixel), and a
+   least-squares circle is fitted to those points, dropping outliers in three rounds (labels,
+   pen marks and colonies near the wall). The dish radius reads 0.2-2.3 px short of the drawn
+   agar edge on the synthetic plates (the dark meniscus ring starts inside it). The usable area
+   is the dish shrunk by ``rim_margin_px``, or a configured circle (``PlateParams.region``, also
+   shrunk) or polygon (used as is). Objects within 3 px of the usable area's border are ignored
+   (a colony cut by the rim margin cannot be picked).
+2. **Objects** (paper eq. 1, with no knowledge of the agar's colour). The background mean is
+   estimated from the dish itself, locally: on the dish subsampled by ``background_scale``, a
+   5x5 median gives a first estimate, pixels that deviate from it are masked out, and a
+   normalised Gaussian convolution of the remaining agar gives the background, resized back
+   (so a lighting gradient does not matter). A pixel is foreground when its summed squared
+   deviation from the background over B, G, R (optionally weighted) exceeds
+   ``color_threshold``; contours are traced in the 8-neighbourhood (OpenCV). The gradient at
+   each contour point is a 5x5 Sobel of that deviation image: it points into every object,
+   whatever its colour. D_alpha, the centroid and the centroid-inside test come from V1's
+   :func:`labauto.vision.shape_angle.shape_angles`, vectorised over all contours.
+   ``method="detector"`` uses V1's :func:`labauto.vision.detector.detect` instead (slower).
 3. **Artefacts** are dropped, in this order: ``area < min_colony_area_px`` (dust) or
-   ``> max_colony_area_px``; mean width ``2 * area / perimeter < min_width_px`` (scratches, pen
-   strokes; a disc of radius r gives r, a strip of width w gives w); elongation
-   ``sqrt(l1 / l2)`` of the second moments ``> max_elongation`` (glare streaks, pen strokes; the
-   paper's DES limit is about 1:4).
+   ``> max_colony_area_px``; mean width ``2 * area / perimeter < min_width_px`` (scratches, thin
+   pen strokes: a disc of radius r gives r, a strip of width w gives w); elongation
+   ``sqrt(l1 / l2)`` of the second moments above ``max_elongation`` (glare streaks, straight
+   strokes; the paper's DES limit is about 1:4); area above ``max_fill_ratio`` times the largest
+   inscribed disc (curved or closed pen writing). The body's mask is its filled contour
+   restricted to the foreground (a loop of ink is not solid) and closed with a 5x5 disc.
 4. **Classes.** Authentic: a DES, i.e. centroid inside and D_alpha (median by default) below
-   ``des_threshold_deg``, and convex enough (solidity, area over convex-hull area, at least
-   ``min_solidity``: a large colony with a small one at its side can keep a low median D_alpha).
-   Merged: any other object. Mixed: a DES whose colours do not follow one species' dome: the
-   colony's pixels at least ``edge_skip_px`` inside its boundary are fitted per channel by a
-   quadratic in the normalised distance to the boundary (dome shading of one species); a pixel
-   whose colour lies more than ``mix_residual`` grey levels (Euclidean, BGR) from that fit is an
-   outlier, and the colony is mixed when the fraction of outliers (``mix_score``) is at least
-   ``mix_fraction`` (a sector or speckles of a second species of another colour or brightness).
-5. **Merged count.** Peaks of the distance transform of the merged body, kept greedily from the
-   highest; a peak counts as a new colony when the distance transform along the segment to every
-   peak already kept dips below ``valley_ratio`` times the lower of the two peaks (a waist). At
-   least 2.
+   ``des_threshold_deg``, and no waist: the deepest concavity (distance from the convex hull)
+   is below ``max_concavity`` times the inscribed radius. D_alpha alone does not separate a
+   merged pair of unequal colonies (they read 14-46 degrees, single colonies 2-21), the waist
+   does (measured: singles <= 0.12, merged >= 0.22). Merged: every other object. Mixed: a DES
+   whose colours do not follow one species' dome. Its pixels at least ``edge_skip_px`` inside
+   the boundary are fitted per channel by a quadratic in the normalised distance to the
+   boundary (the dome shading of one species); a pixel farther than ``mix_residual`` grey
+   levels (Euclidean, BGR) from the fit is an outlier, and the colony is mixed when the fraction
+   of outliers (``mix_score``) is at least ``mix_fraction``: a sector or speckles of a second
+   species of another colour or brightness. The rule is absolute, not relative to the plate's
+   other colonies, so a plate of only mixed colonies is still read right.
+5. **Merged count.** Peaks of the merged body's distance transform (one per plateau), kept
+   greedily from the highest; a peak is a new colony when the distance transform along the
+   straight segment to every peak already kept dips below ``valley_ratio`` times the lower peak
+   (a waist). At least 2. Compact clumps of three whose members overlap deeply are the usual
+   miss (counted 2).
 
 Coordinates: pixels, origin at the centre of the top-left pixel, x right, y down.
 """
@@ -116,9 +126,6 @@ class PlateParams:
     max_fill_ratio : float
         Objects whose area exceeds this many times the area of their largest inscribed disc are
         strokes (pen writing, scratches); merged chains of up to ~4 colonies stay below 5.
-    min_core_fraction : float
-        Objects of which an opening with a disc of half their inscribed radius keeps less than
-        this fraction are strokes with a thick knot (a pen's corner); colonies keep nearly all.
     des_threshold_deg : float
         D_alpha threshold of a DES, degrees (25: colonies are at most ~1:1.6 and read <= 21;
         the paper's "typical DES" of ~30 also takes in merged pairs of unequal size).
@@ -153,7 +160,6 @@ class PlateParams:
     min_width_px: float = 5.0
     max_elongation: float = 3.5
     max_fill_ratio: float = 5.0
-    min_core_fraction: float = 0.5
     des_threshold_deg: float = 25.0
     statistic: str = "median"
     max_concavity: float = 0.17
@@ -198,7 +204,7 @@ class PlateParams:
                 f"PlateParams.dish_radius_range must satisfy 0 < lo < hi <= 1, got "
                 f"{self.dish_radius_range!r}"
             )
-        for name in ("mix_fraction", "valley_ratio", "min_core_fraction"):
+        for name in ("mix_fraction", "valley_ratio"):
             if not 0 <= getattr(self, name) <= 1:
                 raise ValueError(
                     f"PlateParams.{name} must be in [0, 1], got {getattr(self, name)!r}"
@@ -353,9 +359,7 @@ def _as_bgr(image: Any) -> np.ndarray:
 # Dish
 
 
-def find_dish(
-    image: np.ndarray, radius_range: tuple[float, float] = (0.30, 0.50)
-) -> Dish:
+def find_dish(image: np.ndarray, radius_range: tuple[float, float] = (0.30, 0.50)) -> Dish:
     """Find the petri dish: the agar disc inside the wall.
 
     A Hough circle on a grey image subsampled to ~128 px gives a first guess. Along rays at full
@@ -389,8 +393,14 @@ def find_dish(
     r_min = radius_range[0] * min(h, w) / step
     r_max = radius_range[1] * min(h, w) / step
     circles = cv2.HoughCircles(
-        small, cv2.HOUGH_GRADIENT, dp=1, minDist=max(small.shape), param1=60, param2=15,
-        minRadius=int(r_min), maxRadius=int(math.ceil(r_max)),
+        small,
+        cv2.HOUGH_GRADIENT,
+        dp=1,
+        minDist=max(small.shape),
+        param1=60,
+        param2=15,
+        minRadius=int(r_min),
+        maxRadius=math.ceil(r_max),
     )
     if circles is None:
         raise ValueError("no petri dish found in the image; set PlateParams.region to the dish")
@@ -409,7 +419,7 @@ def _refine_dish(
     map_y = (cy + np.sin(theta)[:, None] * radii[None, :]).astype(np.float32)
     prof = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     prof = prof.astype(np.float32)
-    n_ref = max(int(round(4.0 / step)), 2)
+    n_ref = max(round(4.0 / step), 2)
     ref = prof[:, :n_ref].mean(axis=1)  # agar colour at the inner end of every ray
     diff = prof - ref[:, None, :]
     dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
@@ -417,12 +427,12 @@ def _refine_dish(
     first = np.argmax(dist >= _DISH_EDGE_CONTRAST, axis=1)
     ok = (dist[rows, first] >= _DISH_EDGE_CONTRAST) & (first > 0)
     # height of the first peak: the largest distance within 3 px after the first crossing
-    win = first[:, None] + np.arange(int(round(3.0 / step)) + 1)[None, :]
+    win = first[:, None] + np.arange(round(3.0 / step) + 1)[None, :]
     peak = dist[rows[:, None], np.minimum(win, dist.shape[1] - 1)].max(axis=1)
     half = np.maximum(peak / 2.0, _DISH_EDGE_CONTRAST / 2.0)
     # walk back from the first crossing to the half-height crossing
     idx = first.copy()
-    for _ in range(int(round(3.0 / step))):
+    for _ in range(round(3.0 / step)):
         back = ok & (idx > 1) & (dist[rows, idx - 1] >= half)
         idx = np.where(back, idx - 1, idx)
     d0, d1 = dist[rows, np.maximum(idx - 1, 0)], dist[rows, idx]
@@ -597,11 +607,6 @@ def _measure(
     pixel_area = float(np.count_nonzero(mask))
     if pixel_area > params.max_fill_ratio * math.pi * r_in * r_in:
         return "stroke"
-    k = 2 * max(int(round(0.5 * r_in)), 1) + 1
-    core = cv2.morphologyEx(mask, cv2.MORPH_OPEN,
-                            cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
-    if np.count_nonzero(core) < params.min_core_fraction * pixel_area:
-        return "stroke"
     # deepest concavity: largest distance from the hull's outline of a hull pixel not in the body
     hull_mask = np.zeros_like(mask)
     cv2.fillConvexPoly(hull_mask, cv2.convexHull(contour) - shift, 1)
@@ -751,7 +756,7 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
                 area_px=body.area,
                 d_alpha_median=float(d_alpha[k]),
                 estimated_count=count,
-                contour=contours[k].reshape(-1, 2).astype(float) + [x0, y0],
+                contour=contours[k].reshape(-1, 2).astype(float) + np.array([x0, y0]),
                 mix_score=float(score),
             )
         )
@@ -794,8 +799,9 @@ def _objects_by_segmentation(roi: np.ndarray, usable: np.ndarray, params: PlateP
     offsets = np.concatenate(([0], np.cumsum([len(c) for c in kept])))
     points = np.concatenate(kept).reshape(-1, 2)
     grads = _gradients(dev, points)
-    sa = shape_angles(points.astype(np.float64), grads.astype(np.float64), offsets,
-                      np.ones(len(kept), bool))
+    sa = shape_angles(
+        points.astype(np.float64), grads.astype(np.float64), offsets, np.ones(len(kept), bool)
+    )
     return kept, sa.statistic(params.statistic), sa.centroid_inside, sa.centroid, rejected, fg
 
 
@@ -823,5 +829,11 @@ def _objects_by_detector(roi: np.ndarray, usable: np.ndarray, params: PlateParam
         d_alpha.append(obj.d_alpha_median if params.statistic == "median" else obj.d_alpha_mean)
         inside.append(obj.centroid_inside)
         centroids.append(obj.centroid)
-    return (contours, np.asarray(d_alpha, float), np.asarray(inside, bool),
-            np.asarray(centroids, float).reshape(-1, 2), rejected, None)
+    return (
+        contours,
+        np.asarray(d_alpha, float),
+        np.asarray(inside, bool),
+        np.asarray(centroids, float).reshape(-1, 2),
+        rejected,
+        None,
+    )

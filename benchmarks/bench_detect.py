@@ -1,0 +1,180 @@
+"""Detector speed and ellipse precision/recall on synthetic 1280x1024 colour scenes.
+
+Each scene (``labauto.synthetic.shapes.make_scene``) holds about 40 ellipses among 90 rectangles,
+lines, stars, triangles and crescents, with Gaussian noise. For several seeds we time (median of
+repeats) and score, in the same run:
+
+* ``detect`` of labauto (``labauto.detect`` with ``--api`` when it exists, else
+  ``labauto.vision.detector.detect``): core (no shape label, no fit), with shape labels, and with
+  labels and ellipse fitting;
+* a plain OpenCV pipeline: grey, ``cv2.Canny``, ``cv2.findContours``, ``cv2.fitEllipse`` on every
+  contour with >= 5 points (every fit counts as an ellipse);
+* ``cv2.ximgproc`` EdgeDrawing ellipses, when opencv-contrib is installed.
+
+Ellipse detections: for ``detect`` the DES whose shape label is circle/ellipse (rows without labels:
+every DES); a detection matches a true ellipse when its centre is within 2 px and, when the row
+gives axes, both semi-axes are within 10 % (+0.5 px). Run: ``python benchmarks/bench_detect.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+
+import cv2
+import numpy as np
+
+from labauto.synthetic.shapes import make_scene
+from labauto.vision.detector import DetectorParams
+from labauto.vision.detector import detect as vision_detect
+
+Detection = tuple[float, float, float | None, float | None]  # cx, cy, a, b
+
+
+def _detect_fn(api: bool) -> tuple[str, Callable]:
+    if api:
+        try:
+            from labauto import detect as api_detect  # the lead's public wrapper
+
+            return "labauto.detect", lambda img, p: api_detect(img, **p.__dict__)
+        except ImportError:
+            pass
+    return "vision.detect", vision_detect
+
+
+def detections_from_result(result, use_labels: bool) -> list[Detection]:
+    out = []
+    for obj in result.objects:
+        if not obj.is_des:
+            continue
+        if use_labels and obj.shape not in ("circle", "ellipse"):
+            continue
+        if obj.ellipse is not None:
+            (cx, cy), (a, b) = obj.ellipse.center, obj.ellipse.axes
+            out.append((cx, cy, a, b))
+        else:
+            out.append((obj.centroid[0], obj.centroid[1], None, None))
+    return out
+
+
+def plain_opencv(image: np.ndarray) -> list[Detection]:
+    grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    edges = cv2.Canny(grey, 50, 150)
+    contours, _ = cv2.findContours(edges, cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
+    out = []
+    for c in contours:
+        if len(c) >= 5:
+            (cx, cy), (w, h), _ = cv2.fitEllipse(c)
+            out.append((cx, cy, max(w, h) / 2, min(w, h) / 2))
+    return out
+
+
+def edge_drawing() -> Callable | None:
+    if not hasattr(cv2, "ximgproc"):
+        return None
+    ed = cv2.ximgproc.createEdgeDrawing()
+
+    def run(image: np.ndarray) -> list[Detection]:
+        ed.detectEdges(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY))
+        found = ed.detectEllipses()
+        out = []
+        for row in [] if found is None else found.reshape(-1, found.shape[-1]):
+            cx, cy, r, a, b = row[:5]
+            if r > 0:
+                out.append((cx, cy, r, r))
+            else:
+                out.append((cx, cy, max(a, b), min(a, b)))
+        return out
+
+    return run
+
+
+def score(found: list[Detection], truth: list[dict]) -> tuple[int, int, int]:
+    """(true positives, detections, true ellipses) with one-to-one greedy matching."""
+    ellipses = [t["ellipse"] for t in truth if t["kind"] == "ellipse"]
+    used = set()
+    tp = 0
+    for e in ellipses:
+        (tx, ty), (ta, tb) = e["center"], e["axes"]
+        best, best_d = None, 2.0
+        for i, (cx, cy, a, b) in enumerate(found):
+            if i in used:
+                continue
+            d = float(np.hypot(cx - tx, cy - ty))
+            if d > best_d:
+                continue
+            if a is not None and (abs(a - ta) > 0.1 * ta + 0.5 or abs(b - tb) > 0.1 * tb + 0.5):
+                continue
+            best, best_d = i, d
+        if best is not None:
+            used.add(best)
+            tp += 1
+    return tp, len(found), len(ellipses)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--threads", type=int, default=2, help="cv2.setNumThreads")
+    parser.add_argument("--noise", type=float, default=4.0)
+    parser.add_argument("--api", action="store_true", help="time labauto.detect if it exists")
+    args = parser.parse_args()
+    cv2.setNumThreads(args.threads)
+
+    name, detect = _detect_fn(args.api)
+    rows: list[tuple[str, Callable[[np.ndarray], list[Detection]]]] = []
+    for label, params, labels in [
+        ("core: no label, no fit", DetectorParams(classify=False, fit_ellipses=False), False),
+        ("+ shape labels", DetectorParams(fit_ellipses=False), True),
+        ("+ labels + ellipse fit", DetectorParams(), True),
+    ]:
+        rows.append(
+            (
+                f"{name} {label}",
+                lambda img, p=params, u=labels: detections_from_result(detect(img, p), u),
+            )
+        )
+    rows.append(("plain OpenCV (grey Canny + fitEllipse)", plain_opencv))
+    ed = edge_drawing()
+    if ed is not None:
+        rows.append(("cv2.ximgproc EdgeDrawing ellipses", ed))
+
+    scenes = [
+        make_scene(np.random.default_rng(seed), noise=args.noise) for seed in range(args.seeds)
+    ]
+    print(
+        f"{args.seeds} scenes 1280x1024 BGR, noise sigma {args.noise}, cv2.setNumThreads("
+        f"{args.threads}), {args.repeats} repeats, cv2 {cv2.__version__}"
+    )
+    if ed is None:
+        print(
+            "cv2.ximgproc not installed: EdgeDrawing row skipped (opencv-contrib-python-headless)"
+        )
+    columns = ("ms/image", "min ms", "found", "prec", "recall")
+    header = f"{'pipeline':48s} " + " ".join(f"{c:>9s}" for c in columns)
+    print(header)
+    print("-" * len(header))
+    for label, fn in rows:
+        times, tp, n_found, n_true = [], 0, 0, 0
+        for image, truth in scenes:
+            fn(image)  # warm-up
+            per = []
+            for _ in range(args.repeats):
+                t0 = time.perf_counter()
+                found = fn(image)
+                per.append(time.perf_counter() - t0)
+            times.append(np.median(per))
+            a, b, c = score(found, truth)
+            tp, n_found, n_true = tp + a, n_found + b, n_true + c
+        precision = tp / n_found if n_found else float("nan")
+        recall = tp / n_true if n_true else float("nan")
+        print(
+            f"{label:48s} {1e3 * np.median(times):9.2f} {1e3 * np.min(times):9.2f} "
+            f"{n_found / len(scenes):9.1f} {precision:9.3f} {recall:9.3f}"
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1018 @@
+"""A simulated GRBL 1.1 gantry behind a real pseudo-terminal or TCP socket.
+
+The simulator speaks the same line protocol as a GRBL 1.1 controller, so the real driver
+(:class:`labauto.drivers.grbl.GrblRobot`) talks to it through pyserial exactly as it would talk
+to hardware. It runs in one background thread.
+
+What it simulates (and the choices made where a real machine would differ)
+---------------------------------------------------------------------------
+* **Start-up**: like GRBL with homing enabled (``$22=1``) it starts in ``Alarm`` and prints
+  ``Grbl 1.1h ['$' for help]`` and ``[MSG:'$H'|'$X' to unlock]``; ``homing_lock=False`` starts
+  ``Idle`` instead. ``$H`` moves to the machine origin (0, 0, 0) at ``homing_feed``
+  (``HOMING_FORCE_SET_ORIGIN`` layout) and the ``ok`` comes when homing is done.
+* **Motion**: ``G0``/``G1`` with ``X Y Z F``, ``G20/G21``, ``G90/G91``, ``G53`` (work offsets are
+  always zero, so it changes nothing), ``G54``, ``G17``, ``G94``, ``G80``, ``G4 P<seconds>``,
+  ``M3/M4/M5 S``, ``M7/M8/M9``. Moves are queued (``ok`` at once) and executed one after
+  another at constant speed, no acceleration: a move takes ``distance / feed`` (``G0`` uses
+  ``rapid_feed``). Every simulated duration - moves, dwells, homing - is divided by
+  ``speed_factor``. ``?`` during a move reports ``Run`` with the interpolated ``MPos``.
+  ``G4``, ``M3-M9`` and ``$H`` wait for the planner to empty before their ``ok`` (as GRBL's
+  buffer synchronisation does). Arcs, jogging (``$J=``), probing and overrides are not simulated
+  (``error:20`` / ``error:3``).
+* **Real-time bytes** ``?``, ``!``, ``~`` and Ctrl-X act immediately, also while a line waits.
+  ``!`` stops at once (no deceleration), so holds are always ``Hold:0``. Ctrl-X during motion
+  or homing raises ``ALARM:3`` / ``ALARM:6``, clears the planner, turns outputs off and prints
+  the banner; a controller in ``Alarm`` then wants ``$X`` or ``$H``.
+* **Soft limits**: a target outside ``limits`` raises ``ALARM:2``. As in GRBL 1.1, ALARM:1 and
+  ALARM:2 are *critical*: the controller prints ``[MSG:Reset to continue]`` and ignores
+  everything - lines and ``?`` alike - until Ctrl-X.
+* **Line endings**: like GRBL, ``\\r`` and ``\\n`` each end a line, so ``\\r\\n`` gives two
+  replies. Replies end in ``\\r\\n``.
+
+Faults
+------
+Armed from the constructor (``faults=[{"fault": "delay", "seconds": 0.3}]`` or :class:`Fault`
+objects) or at run time with :meth:`SimulatedGantry.inject`; each is used up by the lines it
+affects:
+
+``no_reply`` (``count``)
+    swallow the next ``count`` lines: not executed, never answered.
+``garbled`` (``count``)
+    execute the next ``count`` lines but answer line noise instead of ``ok``/``error``.
+``delay`` (``seconds``, ``count``)
+    answer the next ``count`` lines ``seconds`` late (wall-clock, not scaled).
+``alarm_mid_move`` (``code``, ``fraction``)
+    the next move (of non-zero length) stops at ``fraction`` of its length with
+    ``ALARM:code`` (1 = hard limit).
+``disconnect``
+    on the next line (not executed) drop the link: the TCP client is closed, the pty is closed
+    and replaced by a new one, and the stable path returned by :meth:`start_pty` is pointed at
+    it - like a USB adapter re-enumerating under the same ``/dev/serial/by-id`` link.
+
+Only one host should be connected at a time: output goes to every open link.
+Run ``python -m labauto.drivers.grbl_sim`` to serve a simulator on a pty for manual use.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import math
+import os
+import re
+import select
+import signal
+import socket
+import tempfile
+import threading
+import time
+import tty
+from collections import deque
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+
+from .grbl_protocol import CRITICAL_ALARMS, TravelLimits
+
+__all__ = ["FAULT_KINDS", "Fault", "SimulatedGantry"]
+
+FAULT_KINDS = ("no_reply", "garbled", "delay", "alarm_mid_move", "disconnect")
+
+#: What a garbled reply looks like on the wire: bit errors, a stray control byte, no "ok".
+GARBLED_REPLY = b"\xf2o\x1b\xebk#\xa7"
+
+_REALTIME = {ord("?"), ord("!"), ord("~"), 0x18}
+_WORD = re.compile(r"([A-Z])([-+]?(?:\d+\.?\d*|\.\d+))?")
+_BUSY_POLL_S = 0.002
+_IDLE_POLL_S = 0.25
+_BUILD_DATE = "20190830"
+
+
+@dataclass
+class Fault:
+    """One armed fault (see the module docstring for the kinds).
+
+    Parameters
+    ----------
+    kind
+        One of :data:`FAULT_KINDS`.
+    count
+        Lines affected by ``no_reply``, ``garbled`` and ``delay``.
+    seconds
+        Reply delay of ``delay`` (wall-clock seconds).
+    code
+        Alarm code raised by ``alarm_mid_move``.
+    fraction
+        Where along the move ``alarm_mid_move`` strikes (0 < fraction < 1).
+    """
+
+    kind: str
+    count: int = 1
+    seconds: float = 0.5
+    code: int = 1
+    fraction: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.kind not in FAULT_KINDS:
+            raise ValueError(f"unknown fault {self.kind!r}; expected one of {FAULT_KINDS}")
+        if self.count < 1:
+            raise ValueError(f"fault {self.kind}: count must be >= 1, got {self.count}")
+        if not self.seconds >= 0:
+            raise ValueError(f"fault {self.kind}: seconds must be >= 0, got {self.seconds}")
+        if not 0 < self.fraction < 1:
+            raise ValueError(f"fault {self.kind}: fraction must be in (0, 1), got {self.fraction}")
+
+    @classmethod
+    def from_config(cls, config: Fault | Mapping[str, object]) -> Fault:
+        """Build a fault from a mapping such as ``{"fault": "delay", "seconds": 0.3}``.
+
+        A :class:`Fault` is copied: the simulator counts its own copy down.
+        """
+        if isinstance(config, Fault):
+            return dataclasses.replace(config)
+        options = dict(config)
+        kind = options.pop("fault", options.pop("kind", None))
+        if kind is None:
+            raise ValueError(f"fault config {config!r} has no 'fault' key")
+        try:
+            return cls(str(kind), **options)  # type: ignore[arg-type]
+        except TypeError as exc:
+            raise ValueError(f"fault config {config!r}: {exc}") from None
+
+
+@dataclass
+class _Move:
+    """A queued straight-line move (or the homing cycle) in machine coordinates."""
+
+    start: tuple[float, float, float]
+    end: tuple[float, float, float]
+    feed: float  # mm/min
+    duration: float  # simulated seconds, already divided by speed_factor
+    homing: bool = False
+    alarm_at: float | None = None  # fraction of the move where an injected alarm strikes
+    alarm_code: int = 1
+    elapsed: float = 0.0
+
+    def point(self, elapsed: float) -> tuple[float, float, float]:
+        if self.duration <= 0:
+            return self.end
+        t = min(max(elapsed / self.duration, 0.0), 1.0)
+        return tuple(a + (b - a) * t for a, b in zip(self.start, self.end, strict=True))  # type: ignore[return-value]
+
+
+@dataclass
+class _Pending:
+    """The answer to a line that cannot be given yet (the controller stops reading meanwhile)."""
+
+    replies: list[str] = field(default_factory=lambda: ["ok"])
+    wait_planner: bool = False  # wait until every queued move is done
+    dwell: float = 0.0  # then wait this long (simulated, scaled)
+    extra_delay: float = 0.0  # then this long (wall clock; the "delay" fault)
+    not_before: float = 0.0
+    then: Callable[[], list[str] | None] | None = None  # action when ready; may add replies
+    garbled: bool = False
+
+
+class _PtyLink:
+    """A pseudo-terminal whose slave side is reached through a stable symlink."""
+
+    def __init__(self, link_path: str) -> None:
+        self.link_path = link_path
+        self.master = -1
+        self.slave = -1
+        self.open()
+
+    def open(self) -> None:
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)  # no echo, no line editing, no CR/LF translation
+        os.set_blocking(self.master, False)
+        temporary = self.link_path + ".new"
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(temporary)
+        os.symlink(os.ttyname(self.slave), temporary)
+        os.replace(temporary, self.link_path)
+
+    @property
+    def device(self) -> str:
+        return os.ttyname(self.slave)
+
+    def fds(self) -> list[int]:
+        return [self.master]
+
+    def read(self, fd: int) -> bytes | None:
+        try:
+            return os.read(self.master, 4096)
+        except BlockingIOError:
+            return b""
+        except OSError:
+            return b""  # EIO: no slave open; our own slave fd normally prevents this
+
+    def write(self, data: bytes) -> None:
+        with contextlib.suppress(BlockingIOError, OSError):
+            os.write(self.master, data)  # a full tty buffer drops output, as a cable would
+
+    def drop(self) -> None:
+        """Close this pty (the host sees EIO) and open a fresh one behind the same link."""
+        self.close_fds()
+        self.open()
+
+    def close_fds(self) -> None:
+        for fd in (self.master, self.slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        self.master = self.slave = -1
+
+    def close(self) -> None:
+        self.close_fds()
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.link_path)
+
+
+class _TcpLink:
+    """A listening TCP socket serving one client at a time (a newer client replaces the old)."""
+
+    def __init__(self, port: int) -> None:
+        self.server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self.server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self.server.bind(("127.0.0.1", port))
+        self.server.listen(2)
+        self.server.setblocking(False)
+        self.client: socket.socket | None = None
+
+    @property
+    def port(self) -> int:
+        return self.server.getsockname()[1]
+
+    def fds(self) -> list[int]:
+        fds = [self.server.fileno()]
+        if self.client is not None:
+            fds.append(self.client.fileno())
+        return fds
+
+    def read(self, fd: int) -> bytes | None:
+        """Return received bytes, ``b""`` if none, ``None`` when the client went away."""
+        if fd == self.server.fileno():
+            with contextlib.suppress(BlockingIOError):
+                client, _ = self.server.accept()
+                client.setblocking(False)
+                client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                self.drop()
+                self.client = client
+            return b""
+        if self.client is None:
+            return b""
+        try:
+            data = self.client.recv(4096)
+        except BlockingIOError:
+            return b""
+        except OSError:
+            data = b""
+        if not data:
+            self.drop()
+            return None
+        return data
+
+    def write(self, data: bytes) -> None:
+        if self.client is None:
+            return
+        try:
+            self.client.sendall(data)
+        except OSError:
+            self.drop()
+
+    def drop(self) -> None:
+        if self.client is not None:
+            with contextlib.suppress(OSError):
+                self.client.close()
+            self.client = None
+
+    def close(self) -> None:
+        self.drop()
+        self.server.close()
+
+
+class SimulatedGantry:
+    """A GRBL 1.1 gantry simulated in a thread, served over a pty and/or TCP.
+
+    Parameters
+    ----------
+    limits
+        Soft limits in machine coordinates (mm); a target outside raises ``ALARM:2``.
+    speed_factor
+        Divides every simulated duration (tests use 50-200).
+    firmware
+        Version in the banner and ``$I`` (``"1.1h"``).
+    faults
+        Faults armed from the start (:class:`Fault` objects or mappings, see module docstring).
+    homing_lock
+        Start in ``Alarm`` (GRBL with homing enabled, the default) instead of ``Idle``.
+    rapid_feed, homing_feed
+        Feed rates in mm/min of ``G0`` and of the homing cycle.
+
+    Examples
+    --------
+    >>> with SimulatedGantry(speed_factor=100) as sim:  # doctest: +SKIP
+    ...     robot = GrblRobot(sim.start_pty())
+    """
+
+    def __init__(
+        self,
+        limits: TravelLimits | None = None,
+        speed_factor: float = 1.0,
+        firmware: str = "1.1h",
+        faults: Iterable[Fault | Mapping[str, object]] | None = None,
+        *,
+        homing_lock: bool = True,
+        rapid_feed: float = 6000.0,
+        homing_feed: float = 3000.0,
+    ) -> None:
+        if not speed_factor > 0:
+            raise ValueError(f"speed_factor must be > 0, got {speed_factor!r}")
+        if not (rapid_feed > 0 and homing_feed > 0):
+            raise ValueError(f"feeds must be > 0, got {rapid_feed!r}, {homing_feed!r}")
+        self.limits = limits or TravelLimits()
+        self.speed_factor = float(speed_factor)
+        self.firmware = firmware
+        self.rapid_feed = float(rapid_feed)
+        self.homing_feed = float(homing_feed)
+        self._homing_lock = homing_lock
+        self._faults: list[Fault] = [Fault.from_config(f) for f in faults or ()]
+
+        self._lock = threading.RLock()
+        self._thread: threading.Thread | None = None
+        self._stopping = threading.Event()
+        self._wake_r, self._wake_w = os.pipe()
+        self._pty: _PtyLink | None = None
+        self._tcp: _TcpLink | None = None
+        self._tempdir: str | None = None
+
+        self._received: list[str] = []
+        self._realtime_received: list[str] = []
+        self._rx = bytearray()
+        self._lines: deque[str] = deque()
+        self._reports = 0
+        self._position = (0.0, 0.0, 0.0)
+        self._power_up()
+
+    # ---------------------------------------------------------------- public API
+
+    def start_pty(self) -> str:
+        """Serve on a new pseudo-terminal and return the path to give the driver.
+
+        The path is a symlink in a private temporary directory that always points at the
+        current pty slave (see the ``disconnect`` fault); the real device is :attr:`pty_device`.
+        """
+        with self._lock:
+            if self._pty is None:
+                self._tempdir = tempfile.mkdtemp(prefix="labauto-grbl-")
+                self._pty = _PtyLink(os.path.join(self._tempdir, "ttyGRBL"))
+                self._power_on_messages()
+            path = self._pty.link_path
+        self._start_thread()
+        return path
+
+    def start_tcp(self, port: int = 0) -> str:
+        """Listen on 127.0.0.1 (``port=0`` picks a free port) and return ``socket://127.0.0.1:PORT``."""
+        with self._lock:
+            if self._tcp is None:
+                self._tcp = _TcpLink(port)
+                self._power_on_messages()
+            url = f"socket://127.0.0.1:{self._tcp.port}"
+        self._start_thread()
+        return url
+
+    def stop(self) -> None:
+        """Stop the thread and close every link (idempotent)."""
+        self._stopping.set()
+        with contextlib.suppress(OSError):
+            os.write(self._wake_w, b"x")
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+            self._thread = None
+        with self._lock:
+            if self._pty is not None:
+                self._pty.close()
+                self._pty = None
+            if self._tcp is not None:
+                self._tcp.close()
+                self._tcp = None
+            if self._tempdir is not None:
+                with contextlib.suppress(OSError):
+                    os.rmdir(self._tempdir)
+                self._tempdir = None
+        for fd in (self._wake_r, self._wake_w):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        self._wake_r = self._wake_w = -1
+
+    def __enter__(self) -> SimulatedGantry:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+    def inject(self, fault: str, **options: object) -> None:
+        """Arm a fault, e.g. ``inject("delay", seconds=0.3)`` (see the module docstring).
+
+        Raises
+        ------
+        ValueError
+            For an unknown fault kind or option.
+        """
+        armed = Fault.from_config({"fault": fault, **options})
+        with self._lock:
+            self._faults.append(armed)
+
+    def clear_faults(self) -> None:
+        """Disarm every fault not yet used."""
+        with self._lock:
+            self._faults.clear()
+
+    @property
+    def faults(self) -> list[Fault]:
+        """Faults still armed."""
+        with self._lock:
+            return list(self._faults)
+
+    @property
+    def pty_device(self) -> str | None:
+        """The current ``/dev/pts/N`` behind :meth:`start_pty`'s path (``None`` without pty)."""
+        with self._lock:
+            return self._pty.device if self._pty else None
+
+    @property
+    def received(self) -> list[str]:
+        """Every line received so far (real-time bytes excluded), as sent."""
+        with self._lock:
+            return list(self._received)
+
+    @property
+    def realtime_received(self) -> list[str]:
+        """Every real-time command received: ``"?"``, ``"!"``, ``"~"`` or ``"^X"``."""
+        with self._lock:
+            return list(self._realtime_received)
+
+    @property
+    def position(self) -> tuple[float, float, float]:
+        """Current machine position in mm (interpolated during a move)."""
+        with self._lock:
+            self._advance(time.monotonic())
+            return self._current_position()
+
+    @property
+    def state(self) -> str:
+        """Machine state as a status report shows it (``"Idle"``, ``"Hold:0"``, ...)."""
+        with self._lock:
+            self._advance(time.monotonic())
+            return self._state_text()
+
+    @property
+    def tool_on(self) -> bool:
+        """Whether the flood-coolant output (``M8``, the pick tool by default) is on."""
+        with self._lock:
+            return self._flood
+
+    @property
+    def homed(self) -> bool:
+        """Whether a homing cycle has completed since start-up."""
+        with self._lock:
+            return self._homed
+
+    # ---------------------------------------------------------------- machine state
+
+    def _power_up(self) -> None:
+        self._state = "Alarm" if self._homing_lock else "Idle"
+        self._homed = False
+        self._reset_modal()
+        self._planner: deque[_Move] = deque()
+        self._pending: _Pending | None = None
+        self._lockout: str | None = None  # "critical" (only Ctrl-X) or "sleep"
+        self._last_tick = time.monotonic()
+        self._boot_messages = self._banner()
+
+    def _reset_modal(self) -> None:
+        self._motion_mode = 0
+        self._inches = False
+        self._relative = False
+        self._feed = 0.0
+        self._spindle_speed = 0.0
+        self._spindle = "off"  # "cw", "ccw"
+        self._flood = False
+        self._mist = False
+
+    def _banner(self) -> list[str]:
+        lines = [f"Grbl {self.firmware} ['$' for help]"]
+        if self._state == "Alarm":
+            lines.append("[MSG:'$H'|'$X' to unlock]")
+        return lines
+
+    def _current_position(self) -> tuple[float, float, float]:
+        if self._planner:
+            block = self._planner[0]
+            return block.point(block.elapsed)
+        return self._position
+
+    def _planned_end(self) -> tuple[float, float, float]:
+        return self._planner[-1].end if self._planner else self._position
+
+    def _state_text(self) -> str:
+        return "Hold:0" if self._state == "Hold" else self._state
+
+    def _status_report(self) -> str:
+        x, y, z = self._current_position()
+        moving = self._state in ("Run", "Home") and bool(self._planner)
+        feed = self._planner[0].feed if moving else 0.0
+        report = f"<{self._state_text()}|MPos:{x:.3f},{y:.3f},{z:.3f}|FS:{feed:.0f},"
+        report += f"{self._spindle_speed if self._spindle != 'off' else 0:.0f}"
+        if self._reports % 10 == 0:
+            report += "|WCO:0.000,0.000,0.000"
+        accessories = (
+            {"cw": "S", "ccw": "C"}.get(self._spindle, "")
+            + ("F" if self._flood else "")
+            + ("M" if self._mist else "")
+        )
+        if accessories:
+            report += f"|Ov:100,100,100|A:{accessories}"
+        self._reports += 1
+        return report + ">"
+
+    def _advance(self, now: float) -> None:
+        """Run the planner up to ``now``, emitting the alarm of an injected fault if it strikes."""
+        dt = now - self._last_tick
+        self._last_tick = now
+        if self._state not in ("Run", "Home"):
+            return
+        while dt > 0 and self._planner:
+            block = self._planner[0]
+            if block.alarm_at is not None:
+                strike = block.alarm_at * block.duration
+                if block.elapsed + dt >= strike:
+                    block.elapsed = strike
+                    self._emit(self._alarm(block.alarm_code))
+                    return
+            remaining = block.duration - block.elapsed
+            if dt >= remaining:
+                dt -= remaining
+                self._position = block.end
+                self._planner.popleft()
+            else:
+                block.elapsed += dt
+                dt = 0.0
+        if not self._planner:
+            self._state = "Idle"
+
+    def _alarm(self, code: int) -> list[str]:
+        """Stop everything where it is and enter the alarm state."""
+        self._position = self._current_position()
+        self._planner.clear()
+        self._pending = None
+        self._lines.clear()
+        self._spindle, self._flood, self._mist = "off", False, False
+        self._state = "Alarm"
+        messages = [f"ALARM:{code}"]
+        if code in CRITICAL_ALARMS:
+            self._lockout = "critical"
+            messages.append("[MSG:Reset to continue]")
+        return messages
+
+    def _soft_reset(self) -> list[str]:
+        messages: list[str] = []
+        if self._state in ("Run", "Home"):
+            messages = self._alarm(6 if self._state == "Home" else 3)
+        self._position = self._current_position()
+        self._planner.clear()
+        self._pending = None
+        self._lines.clear()
+        self._rx.clear()
+        self._lockout = None
+        if self._state == "Sleep":
+            self._state = "Alarm"
+        elif self._state != "Alarm":
+            self._state = "Idle"
+        self._reset_modal()
+        return messages + self._banner()
+
+    # ---------------------------------------------------------------- faults
+
+    def _take_fault(self, kind: str) -> Fault | None:
+        for fault in self._faults:
+            if fault.kind == kind:
+                if kind in ("alarm_mid_move", "disconnect"):
+                    self._faults.remove(fault)
+                else:
+                    fault.count -= 1
+                    if fault.count == 0:
+                        self._faults.remove(fault)
+                return fault
+        return None
+
+    # ---------------------------------------------------------------- line execution
+
+    def _accept_line(self, raw: str) -> _Pending | None:
+        """Execute one received line; return its (maybe deferred) answer, or None for none."""
+        if self._take_fault("no_reply"):
+            return None
+        delay = self._take_fault("delay")
+        garbled = self._take_fault("garbled") is not None
+        pending = self._execute(raw)
+        pending.garbled = garbled
+        if delay is not None:
+            pending.extra_delay = delay.seconds
+        return pending
+
+    def _execute(self, raw: str) -> _Pending:
+        line = _strip_comments(raw).replace(" ", "").upper()
+        if len(raw) > 79:
+            return _Pending(["error:11"])
+        if not line:
+            return _Pending()
+        if line.startswith("$"):
+            return self._system_command(line)
+        if self._state in ("Alarm", "Jog"):
+            return _Pending(["error:9"])
+        try:
+            return self._gcode(line)
+        except _GcodeError as exc:
+            return _Pending([f"error:{exc.code}"])
+
+    def _system_command(self, line: str) -> _Pending:
+        command = line[1:]
+        if command == "":
+            return _Pending(
+                ["[HLP:$$ $# $G $I $N $x=val $Nx=line $J=line $SLP $C $X $H ~ ! ? ctrl-x]", "ok"]
+            )
+        if command == "G":
+            return _Pending([self._parser_state(), "ok"])
+        if command == "X":
+            if self._state == "Alarm":
+                self._state = "Idle"
+                return _Pending(["[MSG:Caution: Unlocked]", "ok"])
+            return _Pending()
+        if command == "C":
+            if self._state == "Check":
+                self._state = "Idle"
+                return _Pending(["[MSG:Disabled]", "ok", *self._soft_reset()])
+            if self._state != "Idle":
+                return _Pending(["error:8"])
+            self._state = "Check"
+            return _Pending(["[MSG:Enabled]", "ok"])
+        if self._state not in ("Idle", "Alarm"):
+            return _Pending(["error:8"])
+        if command == "$":
+            return _Pending([*self._settings(), "ok"])
+        if command == "I":
+            return _Pending([f"[VER:{self.firmware}.{_BUILD_DATE}:]", "[OPT:V,15,128]", "ok"])
+        if command == "H":
+            return self._start_homing()
+        if command == "SLP":
+            self._state = "Sleep"
+            self._lockout = "sleep"
+            self._spindle, self._flood, self._mist = "off", False, False
+            return _Pending(["ok", "[MSG:Sleeping]"])
+        if re.fullmatch(r"\d+=[-+]?\d*\.?\d*", command):
+            return _Pending()
+        return _Pending(["error:3"])
+
+    def _settings(self) -> list[str]:
+        (x0, x1), (y0, y1), (z0, z1) = self.limits.x, self.limits.y, self.limits.z
+        return [
+            "$10=1", "$20=1", "$21=1", "$22=1",
+            f"$110={self.rapid_feed:.3f}", f"$111={self.rapid_feed:.3f}",
+            f"$112={self.rapid_feed:.3f}",
+            f"$130={x1 - x0:.3f}", f"$131={y1 - y0:.3f}", f"$132={z1 - z0:.3f}",
+        ]  # fmt: skip
+
+    def _parser_state(self) -> str:
+        spindle = {"off": "M5", "cw": "M3", "ccw": "M4"}[self._spindle]
+        coolant = " ".join(c for c, on in (("M7", self._mist), ("M8", self._flood)) if on)
+        return (
+            f"[GC:G{self._motion_mode} G54 G17 {'G20' if self._inches else 'G21'} "
+            f"{'G91' if self._relative else 'G90'} G94 {spindle} {coolant or 'M9'} T0 "
+            f"F{self._feed:g} S{self._spindle_speed:g}]"
+        )
+
+    def _start_homing(self) -> _Pending:
+        start = self._current_position()
+        home = (0.0, 0.0, 0.0)
+        distance = math.dist(start, home)
+        duration = distance / self.homing_feed * 60.0 / self.speed_factor
+        self._planner.append(_Move(start, home, self.homing_feed, duration, homing=True))
+        self._state = "Home"
+
+        def finish() -> None:
+            self._homed = True
+
+        return _Pending(wait_planner=True, then=finish)
+
+    def _gcode(self, line: str) -> _Pending:
+        words = _parse_words(line)
+        g_codes = [value for letter, value in words if letter == "G"]
+        m_codes = [value for letter, value in words if letter == "M"]
+        values: dict[str, float] = {}
+        for letter, value in words:
+            if letter in "GMN":
+                continue
+            if letter not in "XYZFPST":
+                raise _GcodeError(20)
+            if letter in values:
+                raise _GcodeError(25)
+            values[letter] = value
+
+        motion_mode, machine_coords, dwell = self._motion_mode, False, None
+        inches, relative = self._inches, self._relative
+        groups_seen: set[str] = set()
+        for code in g_codes:
+            group = _G_GROUPS.get(code)
+            if group is None:
+                raise _GcodeError(20)
+            if group in groups_seen and group != "nonmodal":
+                raise _GcodeError(21)
+            groups_seen.add(group)
+            if code in (0, 1, 80):
+                motion_mode = int(code)
+            elif code == 4:
+                dwell = values.get("P")
+                if dwell is None:
+                    raise _GcodeError(28)
+                if dwell < 0:
+                    raise _GcodeError(4)
+            elif code in (20, 21):
+                inches = code == 20
+            elif code in (90, 91):
+                relative = code == 91
+            elif code == 53:
+                machine_coords = True
+        for code in m_codes:
+            if code not in (3, 4, 5, 7, 8, 9):
+                raise _GcodeError(20)
+
+        axes = {a: values[a] for a in "XYZ" if a in values}
+        if machine_coords and motion_mode not in (0, 1):
+            raise _GcodeError(30)
+        if axes and (motion_mode == 80 or dwell is not None):
+            raise _GcodeError(31)
+        scale = 25.4 if inches else 1.0
+        feed = values["F"] * scale if "F" in values else self._feed
+        if "F" in values and values["F"] <= 0:
+            raise _GcodeError(4)
+        if axes and motion_mode == 1 and feed <= 0:
+            raise _GcodeError(22)
+
+        target = None
+        if axes:
+            origin = self._planned_end()
+            offset_from_origin = relative and not machine_coords
+            target = tuple(
+                (origin[i] if offset_from_origin else 0.0) + axes[a] * scale
+                if a in axes
+                else origin[i]
+                for i, a in enumerate("XYZ")
+            )
+
+        # Every check passed: commit the modal state (GRBL never half-executes a block).
+        self._motion_mode, self._inches, self._relative, self._feed = (
+            motion_mode, inches, relative, feed
+        )  # fmt: skip
+        if "S" in values:
+            self._spindle_speed = values["S"]
+        if target is not None and not self.limits.contains(*target):
+            # Soft limit: GRBL finishes nothing of the block and raises a critical alarm.
+            self._lines.clear()
+            return _Pending(replies=self._alarm(2))
+        outputs = self._output_changes(m_codes)
+        if self._state == "Check":
+            return _Pending()
+        if outputs is None and dwell is None:
+            if target is not None:
+                self._queue_move(target, motion_mode, feed)
+            return _Pending()
+
+        def synchronised() -> None:
+            if outputs is not None:
+                outputs()
+            if target is not None:
+                self._queue_move(target, motion_mode, feed)
+
+        return _Pending(
+            wait_planner=True, dwell=(dwell or 0.0) / self.speed_factor, then=synchronised
+        )
+
+    def _output_changes(self, m_codes: list[float]) -> Callable[[], None] | None:
+        if not m_codes:
+            return None
+
+        def apply() -> None:
+            for code in m_codes:
+                if code in (3, 4):
+                    self._spindle = "cw" if code == 3 else "ccw"
+                elif code == 5:
+                    self._spindle = "off"
+                elif code == 7:
+                    self._mist = True
+                elif code == 8:
+                    self._flood = True
+                elif code == 9:
+                    self._flood = self._mist = False
+
+        return apply
+
+    def _queue_move(self, target: tuple[float, ...], motion_mode: int, feed: float) -> None:
+        start = self._planned_end()
+        rate = self.rapid_feed if motion_mode == 0 else feed
+        duration = math.dist(start, target) / rate * 60.0 / self.speed_factor
+        move = _Move(start, target, rate, duration)  # type: ignore[arg-type]
+        fault = self._take_fault("alarm_mid_move") if duration > 0 else None
+        if fault is not None:
+            move.alarm_at, move.alarm_code = fault.fraction, fault.code
+        if not self._planner and self._state == "Idle":
+            self._last_tick = time.monotonic()
+            self._state = "Run"
+        self._planner.append(move)
+
+    # ---------------------------------------------------------------- I/O loop
+
+    def _start_thread(self) -> None:
+        if self._thread is None:
+            self._stopping.clear()
+            self._thread = threading.Thread(target=self._run, name="labauto-grbl-sim", daemon=True)
+            self._thread.start()
+        else:
+            with contextlib.suppress(OSError):
+                os.write(self._wake_w, b"x")
+
+    def _links(self) -> list[_PtyLink | _TcpLink]:
+        return [link for link in (self._pty, self._tcp) if link is not None]
+
+    def _emit(self, lines: Iterable[str], raw: bytes | None = None) -> None:
+        data = raw if raw is not None else b"".join(f"{x}\r\n".encode() for x in lines)
+        if data:
+            for link in self._links():
+                link.write(data)
+
+    def _power_on_messages(self) -> None:
+        """Print the start-up banner once, on the first link (nobody may be listening yet)."""
+        if self._boot_messages:
+            self._emit(self._boot_messages)
+            self._boot_messages = []
+
+    def _run(self) -> None:
+        while not self._stopping.is_set():
+            with self._lock:
+                busy = self._service(time.monotonic())
+                owners = {fd: link for link in self._links() for fd in link.fds()}
+            readable, _, _ = select.select(
+                [self._wake_r, *owners], [], [], _BUSY_POLL_S if busy else _IDLE_POLL_S
+            )
+            with self._lock:
+                for fd in readable:
+                    if fd == self._wake_r:
+                        os.read(self._wake_r, 64)
+                        continue
+                    link = owners[fd]
+                    if link not in self._links():
+                        continue
+                    data = link.read(fd)
+                    if data is None:
+                        self._rx.clear()
+                        self._lines.clear()
+                    elif data:
+                        self._receive(data)
+
+    def _receive(self, data: bytes) -> None:
+        now = time.monotonic()
+        for byte in data:
+            if byte in _REALTIME:
+                self._realtime(byte, now)
+            elif byte >= 0x80:
+                continue  # extended real-time commands (overrides): ignored
+            elif byte in (0x0A, 0x0D):
+                line = self._rx.decode("ascii", errors="replace")
+                self._rx.clear()
+                self._received.append(line)
+                if self._take_fault("disconnect"):
+                    self._disconnect()
+                    return
+                if self._lockout is None:
+                    self._lines.append(line)
+            else:
+                self._rx.append(byte)
+
+    def _disconnect(self) -> None:
+        self._rx.clear()
+        self._lines.clear()
+        if self._pty is not None:
+            self._pty.drop()
+        if self._tcp is not None:
+            self._tcp.drop()
+
+    def _realtime(self, byte: int, now: float) -> None:
+        self._advance(now)
+        self._realtime_received.append("^X" if byte == 0x18 else chr(byte))
+        if byte == 0x18:
+            self._emit(self._soft_reset())
+        elif self._lockout == "critical":
+            return
+        elif byte == ord("?"):
+            self._emit([self._status_report()])
+        elif byte == ord("!"):
+            if self._state in ("Run", "Idle"):
+                self._position = self._current_position()
+                self._state = "Hold"
+        elif byte == ord("~") and self._state == "Hold":
+            self._state = "Run" if self._planner else "Idle"
+
+    def _service(self, now: float) -> bool:
+        """Advance time, finish waiting answers, execute queued lines; return True if busy."""
+        self._advance(now)
+        while True:
+            if self._pending is not None:
+                if not self._pending_ready(now):
+                    return True
+                pending, self._pending = self._pending, None
+                extra = pending.then() if pending.then else None
+                replies = pending.replies + (extra or [])
+                if pending.garbled:
+                    self._emit([], raw=GARBLED_REPLY + b"\r\n")
+                else:
+                    self._emit(replies)
+            if not self._lines or self._lockout is not None:
+                return bool(self._planner)
+            self._pending = self._accept_line(self._lines.popleft())
+            self._advance(now)
+
+    def _pending_ready(self, now: float) -> bool:
+        pending = self._pending
+        assert pending is not None
+        if pending.wait_planner:
+            if self._planner or self._state in ("Hold", "Alarm"):
+                return False
+            pending.wait_planner = False
+            pending.not_before = now + pending.dwell
+            pending.dwell = 0.0
+        if now < pending.not_before:
+            return False
+        if pending.extra_delay > 0:
+            pending.not_before = now + pending.extra_delay
+            pending.extra_delay = 0.0
+            return False
+        return True
+
+
+class _GcodeError(Exception):
+    def __init__(self, code: int) -> None:
+        super().__init__(f"error:{code}")
+        self.code = code
+
+
+_G_GROUPS: dict[float, str] = {
+    0: "motion", 1: "motion", 80: "motion", 4: "nonmodal", 53: "nonmodal",
+    17: "plane", 20: "units", 21: "units", 90: "distance", 91: "distance",
+    94: "feedmode", 54: "wcs",
+}  # fmt: skip
+
+
+def _strip_comments(line: str) -> str:
+    line = line.split(";", 1)[0]
+    return re.sub(r"\([^)]*\)", "", line).strip()
+
+
+def _parse_words(line: str) -> list[tuple[str, float]]:
+    words: list[tuple[str, float]] = []
+    position = 0
+    while position < len(line):
+        match = _WORD.match(line, position)
+        if not match:
+            raise _GcodeError(1)
+        if match.group(2) is None:
+            raise _GcodeError(2)
+        words.append((match.group(1), float(match.group(2))))
+        position = match.end()
+    return words
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)  # once is enough: let the clean-up run
+    raise KeyboardInterrupt
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Serve a simulated gantry on a pty (and optionally TCP) until Ctrl-C."""
+    parser = argparse.ArgumentParser(description="Simulated GRBL 1.1 gantry for labauto.")
+    parser.add_argument("--speed-factor", type=float, default=1.0)
+    parser.add_argument("--tcp", type=int, default=None, metavar="PORT", help="also serve TCP")
+    parser.add_argument("--no-homing-lock", action="store_true", help="start Idle, not Alarm")
+    args = parser.parse_args(argv)
+    signal.signal(signal.SIGTERM, _interrupt)  # clean up the pty link on `kill` as on Ctrl-C
+    with SimulatedGantry(
+        speed_factor=args.speed_factor, homing_lock=not args.no_homing_lock
+    ) as sim:
+        print(f"pty: {sim.start_pty()} -> {sim.pty_device}", flush=True)
+        if args.tcp is not None:
+            print(f"tcp: {sim.start_tcp(args.tcp)}", flush=True)
+        with contextlib.suppress(KeyboardInterrupt):
+            while True:
+                time.sleep(3600)
+
+
+if __name__ == "__main__":
+    main()
