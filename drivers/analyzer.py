@@ -66,7 +66,7 @@ class Analyzer:
     name : str
         Device name used in errors and logs.
     on_exchange : callable, optional
-        ``on_exchange(direction, text)`` for each request (``"send"``) and outcome (``"recv"``).
+        ``on_exchange(direction, text)`` for each request (``"tx"``) and outcome (``"rx"``).
     """
 
     def __init__(
@@ -104,6 +104,15 @@ class Analyzer:
         )
         self._result_spans = read_spans(self.map.results)
         self._identification_spans = read_spans(self.map.identification)
+
+    @property
+    def on_exchange(self) -> ExchangeCallback | None:
+        """The ``on_exchange(direction, text)`` callback; may be set at any time."""
+        return self._link.on_exchange
+
+    @on_exchange.setter
+    def on_exchange(self, callback: ExchangeCallback | None) -> None:
+        self._link.on_exchange = callback
 
     @property
     def endpoint(self) -> str:

@@ -46,7 +46,7 @@ from .errors import (
 
 Table = Literal["holding", "input"]
 ExchangeCallback = Callable[[str, str], None]
-"""``on_exchange(direction, text)``: direction is ``"send"`` or ``"recv"``."""
+"""``on_exchange(direction, text)``: direction is ``"tx"`` (sent) or ``"rx"`` (received)."""
 
 PYMODBUS_VERSION: str = pymodbus.__version__
 
@@ -92,8 +92,8 @@ class ModbusClientLink:
     device : str
         Name used in error messages (e.g. ``"analyzer"``).
     on_exchange : callable, optional
-        Called as ``on_exchange("send", text)`` before each request and
-        ``on_exchange("recv", text)`` with the outcome, for the orchestrator's audit log.
+        Called as ``on_exchange("tx", text)`` before each request and
+        ``on_exchange("rx", text)`` with the outcome, for the orchestrator's audit log.
     """
 
     def __init__(
@@ -182,12 +182,12 @@ class ModbusClientLink:
         response = self._execute(request, partial(method, address, count=count, **_unit(unit)))
         registers = list(getattr(response, "registers", None) or [])
         if len(registers) < count:
-            self._log("recv", f"short reply {registers}")
+            self._log("rx", f"short reply {registers}")
             raise UnexpectedReply(
                 f"{request}: expected {count} registers, got {len(registers)}", device=self.device
             )
         registers = registers[:count]
-        self._log("recv", str(registers))
+        self._log("rx", str(registers))
         return registers
 
     def write_registers(
@@ -202,45 +202,45 @@ class ModbusClientLink:
         else:
             call = partial(self._client.write_registers, address, values, **_unit(unit))
         self._execute(request, call)
-        self._log("recv", "ok")
+        self._log("rx", "ok")
 
     # -- internals ----------------------------------------------------------------------------
     def _execute(self, request: str, call: Callable[[], Any]) -> Any:
         with self._lock:
-            self._log("send", request)
+            self._log("tx", request)
             try:
                 response = call()
             except ModbusIOException as exc:
                 if self._serial_hung_up():
                     self._client.close()
-                    self._log("recv", "serial port hung up")
+                    self._log("rx", "serial port hung up")
                     raise DeviceDisconnected(
                         f"{request}: serial port {self.endpoint} hung up", device=self.device
                     ) from exc
-                self._log("recv", f"no reply within {self.timeout:g} s")
+                self._log("rx", f"no reply within {self.timeout:g} s")
                 raise DeviceTimeout(
                     f"{request}: no reply within {self.timeout:g} s from {self.endpoint}",
                     device=self.device,
                 ) from exc
             except ConnectionException as exc:
                 self._client.close()
-                self._log("recv", "connection lost")
+                self._log("rx", "connection lost")
                 raise DeviceDisconnected(
                     f"{request}: connection to {self.endpoint} lost or refused", device=self.device
                 ) from exc
             except ModbusException as exc:
-                self._log("recv", f"protocol error: {exc}")
+                self._log("rx", f"protocol error: {exc}")
                 raise UnexpectedReply(f"{request}: {exc}", device=self.device) from exc
             except OSError as exc:
                 self._client.close()
-                self._log("recv", f"I/O error: {exc}")
+                self._log("rx", f"I/O error: {exc}")
                 raise DeviceDisconnected(f"{request}: {exc}", device=self.device) from exc
             if response is None:
                 raise UnexpectedReply(f"{request}: empty reply", device=self.device)
             if response.isError():
                 code = int(getattr(response, "exception_code", 0))
                 error = modbus_exception_reply(code, device=self.device, request=request)
-                self._log("recv", f"exception {error.exception_name} ({code})")
+                self._log("rx", f"exception {error.exception_name} ({code})")
                 raise error
             return response
 

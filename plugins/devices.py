@@ -29,11 +29,14 @@ class Simulated:
     """A real driver talking to a simulated device it owns; ``close()`` stops both."""
 
     def __init__(self, device: Any, simulator: Any) -> None:
-        self.device = device
-        self.simulator = simulator
+        object.__setattr__(self, "device", device)
+        object.__setattr__(self, "simulator", simulator)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.device, name)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        setattr(self.device, name, value)  # e.g. on_exchange: it belongs to the driver
 
     def close(self) -> None:
         try:

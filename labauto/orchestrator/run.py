@@ -18,9 +18,11 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -85,6 +87,44 @@ def image_digest(image: np.ndarray) -> str:
     return digest.hexdigest()
 
 
+class ExchangeLog:
+    """Device exchanges, buffered and written to the audit log in one insert per step.
+
+    Every line a driver sends or receives (``on_exchange(direction, text)``) becomes an event
+    ``<device>.<direction>`` with the time it happened. Writing each at once would cost a
+    database commit per status poll, so they are kept in memory and flushed before the next
+    step is recorded: the log stays in order, and a crash loses at most the exchanges of the
+    step in progress (whose outcome is then flagged as unknown anyway).
+    """
+
+    def __init__(self, store: Store, run_id: int) -> None:
+        self.store = store
+        self.run_id = run_id
+        self._rows: list[dict[str, Any]] = []
+        self._lock = threading.Lock()
+
+    def logger(self, device: str) -> Callable[[str, str], None]:
+        """The ``on_exchange`` callback for ``device``."""
+
+        def log(direction: str, text: str) -> None:
+            row = {
+                "kind": f"{device}.{direction}",
+                "message": text,
+                "source": device,
+                "ts": datetime.now(UTC),
+            }
+            with self._lock:
+                self._rows.append(row)
+
+        return log
+
+    def flush(self) -> None:
+        """Write the buffered exchanges."""
+        with self._lock:
+            rows, self._rows = self._rows, []
+        self.store.record_events(self.run_id, rows)
+
+
 class ColonyPickingRun:
     """One run of the workcell; ``execute()`` drives it to a final state.
 
@@ -124,6 +164,7 @@ class ColonyPickingRun:
         self.control = control
         self.reporter = reporter
         self.output_dir = Path(config.output.dir) / f"run-{run_id:04d}"
+        self.exchanges = ExchangeLog(store, run_id)
         self.rules = PickRules(
             max_picks=config.picking.max_picks,
             min_neighbor_distance_px=config.picking.min_neighbor_distance_px,
@@ -134,7 +175,8 @@ class ColonyPickingRun:
 
     # -- the audit log -----------------------------------------------------------------------
     def event(self, kind: str, message: str, source: str = "orchestrator", **data: Any) -> None:
-        """Record one event in the audit log and tell the reporter."""
+        """Record one event in the audit log (after the exchanges leading to it)."""
+        self.exchanges.flush()
         self.store.record_event(self.run_id, kind, message, source=source, data=data or None)
         self._notify(kind, message, data)
 
@@ -142,16 +184,6 @@ class ColonyPickingRun:
         """Tell the reporter only: for changes the store already audits (run and pick states)."""
         if self.reporter is not None:
             self.reporter.on_event(kind, message, data or {})
-
-    def exchange_logger(self, device: str) -> Callable[[str, str], None]:
-        """A callback for a driver's ``on_exchange``: one event per line sent or received."""
-
-        def log(direction: str, text: str) -> None:
-            self.store.record_event(
-                self.run_id, f"{device}.{direction}", text, source=device, data=None
-            )
-
-        return log
 
     def _hook(self, name: str, **kwargs: Any) -> None:
         """Call an event hook; a failing exporter is logged, never fatal to the run."""
@@ -196,6 +228,7 @@ class ColonyPickingRun:
         self._notify("run.state", state.value + (f": {error}" if error else ""))
 
     def _finish(self, final: RunState, error: str | None) -> RunOutcome:
+        self.exchanges.flush()
         if final is RunState.STOPPED and self.store.get_run(self.run_id).state != "stopping":
             self._set_run_state(RunState.STOPPING)
         self._set_run_state(final, error)
@@ -348,6 +381,7 @@ class ColonyPickingRun:
         self._hook("labauto_pick_finished", run_id=self.run_id, pick=final.to_dict())
 
     def _pick_state(self, pick: Any, state: PickState, **fields: Any) -> None:
+        self.exchanges.flush()
         self.store.set_pick_state(pick.id, state, **fields)
         self.event(
             "pick.state", f"pick {pick.id}: {state.value}", pick_id=pick.id, state=state.value

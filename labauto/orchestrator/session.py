@@ -87,6 +87,8 @@ def open_run(
     control = RunControl(on_estop=lambda: workcell.robot.soft_reset())
     runner = ColonyPickingRun(run_id, config, store, plugins, workcell, control, reporter)
     control.on_change = lambda command: runner.event(f"run.{command}", f"operator: {command}")
+    workcell.robot.on_exchange = runner.exchanges.logger("robot")
+    workcell.analyzer.on_exchange = runner.exchanges.logger("analyzer")
     if resumed:
         runner.event("run.resumed", f"resuming run {run_id}")
     poller = _ControlPoller(store, run_id, control)

@@ -894,6 +894,36 @@ class Store:
             session.flush()
             return event.id
 
+    def record_events(self, run_id: int | None, events: Sequence[Mapping[str, Any]]) -> None:
+        """Append many events in one transaction (e.g. a step's buffered device exchanges).
+
+        Parameters
+        ----------
+        run_id : int or None
+            The run they belong to.
+        events : sequence of mappings
+            Each with ``kind``, ``message``, ``source`` and optionally ``ts`` (an aware
+            datetime: when it happened; default now) and ``data``.
+        """
+        if not events:
+            return
+        rows = []
+        for position, event in enumerate(events):
+            if not event.get("kind"):
+                raise InvalidValue(f"event {position}: kind must not be empty")
+            rows.append(
+                {
+                    "run_id": run_id,
+                    "kind": event["kind"],
+                    "source": event.get("source", "orchestrator"),
+                    "message": event["message"],
+                    "data": json_data(event.get("data"), f"event {position} data"),
+                    "ts": event.get("ts") or utcnow(),
+                }
+            )
+        with self._write("record_events") as session:
+            session.execute(insert(Event), rows)
+
     def events(
         self, run_id: int | None, kind: str | None = None, *, after_id: int | None = None
     ) -> list[EventRecord]:

@@ -306,14 +306,14 @@ def test_on_exchange_sees_every_request_and_outcome(make_sim: SimPool) -> None:
         with pytest.raises(ModbusServerDeviceBusy):
             a.state()
     assert log[:6] == [
-        ("send", "state: read input 0 unit 1"),  # connect() checks the state
-        ("recv", "[0]"),
-        ("send", "sample id 'AB': write holding 1..8 = [16706, 0, 0, 0, 0, 0, 0, 0] unit 1"),
-        ("recv", "ok"),
-        ("send", "command load: write holding 0 = [1] unit 1"),
-        ("recv", "ok"),
+        ("tx", "state: read input 0 unit 1"),  # connect() checks the state
+        ("rx", "[0]"),
+        ("tx", "sample id 'AB': write holding 1..8 = [16706, 0, 0, 0, 0, 0, 0, 0] unit 1"),
+        ("rx", "ok"),
+        ("tx", "command load: write holding 0 = [1] unit 1"),
+        ("rx", "ok"),
     ]
-    assert log[-1] == ("recv", "exception SERVER_DEVICE_BUSY (6)")
+    assert log[-1] == ("rx", "exception SERVER_DEVICE_BUSY (6)")
 
 
 # -- word order -----------------------------------------------------------------------------------
