@@ -24,8 +24,10 @@ Choices made where the brief is open (all geometry in pixels, scaled with ``min(
   any colony, so the truth of every colony is exact.
 * A merged group's members overlap by 5-28 % of the sum of their radii and the waist where they
   meet is at most 0.72 of the smaller member's radius, so the group is one connected body that is
-  visibly not a DES. Triples are bent chains (angle 60-130 degrees) rather than straight rods.
-* A mixed colony's second species differs from the first by at least 60 RGB levels (Euclidean)
+  visibly not a DES (radii taken along the line joining the centres; the union, eroded by one
+  pixel, must still be one piece). Triples are chains bent by 50-120 degrees whose first and
+  third members do not touch.
+* A mixed colony's second species differs from the first by at least 70 RGB levels (Euclidean)
   and covers 18-45 % (sector) or 12-30 % (speckles) of the colony.
 * Artefacts that lie on the agar are thin (scratches, pen strokes: at most 4.5 px wide), tiny
   (dust: area at most 13 px) or long and thin (glare streaks: length/width of at least 5).
@@ -35,6 +37,7 @@ Coordinates follow DESIGN.md: origin at the centre of the top-left pixel, x righ
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -49,8 +52,8 @@ __all__ = [
     "ArtefactTruth",
     "ColonyTruth",
     "DishTruth",
-    "PlateTruth",
     "PlateScore",
+    "PlateTruth",
     "generate_plate",
     "score_plate",
 ]
@@ -167,6 +170,11 @@ class ArtefactTruth:
     points: np.ndarray
     on_agar: bool
 
+    def __post_init__(self) -> None:
+        # stored rounded to 0.01 px, as in the JSON, so a round trip is exact
+        pts = np.round(np.asarray(self.points, dtype=float).reshape(-1, 2), 2)
+        object.__setattr__(self, "points", pts)
+
     @property
     def center(self) -> tuple[float, float]:
         """Mean of the artefact's points."""
@@ -177,7 +185,7 @@ class ArtefactTruth:
         """Return ``{"kind", "points", "on_agar", "center"}``."""
         return {
             "kind": self.kind,
-            "points": np.round(self.points.reshape(-1, 2), 2).tolist(),
+            "points": self.points.tolist(),
             "on_agar": self.on_agar,
             "center": list(self.center),
         }
@@ -417,7 +425,7 @@ class _Placer:
 
 def _densify(pts: np.ndarray, step: float = 2.0) -> np.ndarray:
     out = [pts[:1]]
-    for p, q in zip(pts[:-1], pts[1:], strict=True):
+    for p, q in itertools.pairwise(pts):
         n = max(int(np.hypot(*(q - p)) / step), 1)
         out.append(p + (q - p) * np.linspace(0, 1, n + 1)[1:, None])
     return np.concatenate(out)
@@ -751,7 +759,7 @@ def _truth_from_mask(
         x0, y0 = int(xs.min()), int(ys.min())
         sub = body[y0 : ys.max() + 1, x0 : xs.max() + 1].astype(np.uint8)
         cs, _ = cv2.findContours(sub, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-        contour = max(cs, key=cv2.contourArea).reshape(-1, 2).astype(float) + [x0, y0]
+        contour = max(cs, key=cv2.contourArea).reshape(-1, 2).astype(float) + np.array([x0, y0])
     return ColonyTruth(
         id=idx,
         kind=kind,
@@ -760,7 +768,7 @@ def _truth_from_mask(
         ellipses=[m.ellipse() for m in members],
         contour=contour,
         area_px=int(xs.size),
-        colours_rgb=[tuple(int(round(v)) for v in np.clip(c, 0, 255)) for c in colours],
+        colours_rgb=[tuple(round(float(v)) for v in np.clip(c, 0, 255)) for c in colours],
         mix_style=style,
         near_agar=near_agar,
     )
