@@ -40,11 +40,13 @@ def run_cmd(config: Config, force_new: bool, resume_id: int | None, as_json: boo
         config, store, resume_id=resume_id, force_new=force_new, reporter=progress
     ) as session:
         progress.start(session.run_id, session.resumed)
-        _install_signal_handlers(session.control)
+        previous = _install_signal_handlers(session.control)
         try:
             outcome = session.execute()
         finally:
             progress.stop()
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
     if as_json:
         click.echo(
             json.dumps(
@@ -68,13 +70,19 @@ def run_cmd(config: Config, force_new: bool, resume_id: int | None, as_json: boo
         raise SystemExit(1)
 
 
+def _counts_text(values: dict[str, Any]) -> str:
+    return ", ".join(f"{key} {value}" for key, value in values.items())
+
+
 def _counts(picks: dict[str, int]) -> str:
     return ", ".join(f"{n} {state}" for state, n in sorted(picks.items())) or "none"
 
 
-def _install_signal_handlers(control: Any) -> None:
+def _install_signal_handlers(control: Any) -> dict[int, Any]:
+    """Ctrl-C stops (twice: e-stop), SIGTERM stops; returns the handlers replaced."""
     if threading.current_thread() is not threading.main_thread():
-        return
+        return {}
+    previous = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
     interrupts = {"count": 0}
 
     def on_interrupt(signum: int, frame: Any) -> None:
@@ -88,6 +96,7 @@ def _install_signal_handlers(control: Any) -> None:
 
     signal.signal(signal.SIGINT, on_interrupt)
     signal.signal(signal.SIGTERM, lambda signum, frame: control.stop())
+    return previous
 
 
 @click.group("runs")
@@ -150,16 +159,19 @@ def runs_show(run_id: int, config: Config, as_json: bool, n_events: int) -> None
     )
     click.echo(f"  started {run.get('started_at')}, finished {run.get('finished_at')}")
     click.echo(f"  plates: {', '.join(report['plates']) or 'none'}")
-    click.echo(f"  colonies: {report['colonies']}")
+    click.echo(f"  colonies: {_counts_text(report['colonies']) or 'none'}")
     click.echo(f"  picks: {_counts(report['picks_by_state'])}")
     for pick in report["attention"]:
         click.echo(f"  ATTENTION pick {pick['id']} (colony {pick['colony_id']}): {pick['error']}")
     for pick in report["picks"]:
-        values = pick.get("result") or {}
+        values = {
+            k: f"{v:.4g}" if isinstance(v, float) else v
+            for k, v in (pick.get("result") or {}).items()
+        }
         click.echo(
             f"  pick {pick['id']}: {pick['state']} at ({pick['deck_x_mm']:.1f}, "
             f"{pick['deck_y_mm']:.1f}) mm, sample {pick.get('sample_id')}"
-            + (f", result {values}" if values else "")
+            + (f", result {_counts_text(values)}" if values else "")
         )
     click.echo("  latest events:")
     for event in report["events"]:

@@ -35,6 +35,7 @@ from labauto.orchestrator.control import EmergencyStop, RunControl, StopRequeste
 from labauto.orchestrator.planning import PickRules, plan_picks
 from labauto.plugin_manager import Plugins
 from labauto.store import Store
+from labauto.store.convert import colony_rows
 from labauto.store.states import PickState, RunState
 
 
@@ -174,10 +175,17 @@ class ColonyPickingRun:
         )
 
     # -- the audit log -----------------------------------------------------------------------
-    def event(self, kind: str, message: str, source: str = "orchestrator", **data: Any) -> None:
+    def event(
+        self,
+        kind: str,
+        message: str,
+        *,
+        source: str = "orchestrator",
+        data: dict[str, Any] | None = None,
+    ) -> None:
         """Record one event in the audit log (after the exchanges leading to it)."""
         self.exchanges.flush()
-        self.store.record_event(self.run_id, kind, message, source=source, data=data or None)
+        self.store.record_event(self.run_id, kind, message, source=source, data=data)
         self._notify(kind, message, data)
 
     def _notify(self, kind: str, message: str, data: dict[str, Any] | None = None) -> None:
@@ -206,7 +214,7 @@ class ColonyPickingRun:
                 "calibration",
                 f"pixel-to-deck residual {calibration.residual_mm:.3f} mm "
                 f"over {calibration.n_points} points",
-                **calibration.to_dict(),
+                data=calibration.to_dict(),
             )
             self._prepare_devices()
             for plate_name, image in self.workcell.camera:
@@ -234,7 +242,10 @@ class ColonyPickingRun:
         self._set_run_state(final, error)
         picks = {str(k): v for k, v in self.store.run_summary(self.run_id).picks_by_state.items()}
         self._hook(
-            "labauto_run_finished", run_id=self.run_id, state=final.value, summary={"picks": picks}
+            "labauto_run_finished",
+            run_id=self.run_id,
+            state=final.value,
+            summary={"picks": picks, "error": error},
         )
         return RunOutcome(self.run_id, final.value, error, picks, self.output_dir)
 
@@ -246,22 +257,22 @@ class ColonyPickingRun:
 
     def _prepare_devices(self) -> None:
         robot, analyzer = self.workcell.robot, self.workcell.analyzer
-        robot.connect()
-        self.event("robot.ready", f"robot connected: {robot.identify()}", source="robot")
+        for name, device in (("robot", robot), ("analyzer", analyzer)):
+            device.connect()
+            info = device.identify()
+            self.event(
+                f"{name}.ready", f"{name} connected: {_summary(info)}", source=name, data=info
+            )
         if self.config.robot.home_on_start:
             robot.home()
             self.event("robot.homed", "robot homed", source="robot")
-        analyzer.connect()
-        self.event(
-            "analyzer.ready", f"analyzer connected: {analyzer.identify()}", source="analyzer"
-        )
 
     def _cleanup(self) -> None:
-        """After a stop: tool off and head up at its place, so the deck is safe to reach into."""
+        """After a stop: tool off and head up where it is, so the deck is safe to reach into."""
         robot = self.workcell.robot
         try:
             robot.tool_off()
-            x, y, _z = robot.status().machine_position or robot.status().work_position
+            x, y, _z = robot.status().position
             robot.move_to(x, y)
             self.event("run.cleanup", f"tool off, head raised at ({x:.1f}, {y:.1f}) mm")
         except Exception as exc:
@@ -272,11 +283,11 @@ class ColonyPickingRun:
         for pick in self.store.flag_picks_in_flight(
             self.run_id, reason="outcome unknown: the run was interrupted during this pick"
         ):
+            flagged = ", flagged for the operator" if pick.needs_attention else ""
             self._notify(
                 f"pick.{pick.state}",
-                f"pick {pick.id} (colony {pick.colony_id}) "
-                f"was interrupted: now {pick.state}"
-                + (", flagged for the operator" if pick.needs_attention else ""),
+                f"pick {pick.id} (colony {pick.colony_id}) was interrupted: now {pick.state}"
+                + flagged,
             )
 
     # -- one plate ---------------------------------------------------------------------------
@@ -297,7 +308,7 @@ class ColonyPickingRun:
             self.event(
                 "plate.resumed",
                 f"{plate_name}: colonies already stored, not re-stored",
-                plate=plate_name,
+                data={"plate": plate_name},
             )
         else:
             colony_ids = self._store_plate(plate_name, stored.id, result, calibration)
@@ -317,22 +328,26 @@ class ColonyPickingRun:
             "plate.analyzed",
             f"{plate_name}: {counts['authentic']} authentic, {counts['merged']} merged, "
             f"{counts['mixed']} mixed ({result.timing_ms:.1f} ms)",
-            plate=plate_name,
-            **counts,
+            data={"plate": plate_name, **counts},
         )
-        detections = [_detection_row(i, c) for i, c in enumerate(result.colonies)]
-        self.store.add_detections(self.run_id, image_id, detections)
+        method = f"plate:{plate_params(self.config).method}"
+        detection_ids = self.store.add_detections(
+            self.run_id, image_id, [_detection_row(c, method) for c in result.colonies]
+        )
         self._hook(
             "labauto_detections_stored",
             run_id=self.run_id,
             image_id=image_id,
             plate=plate_name,
-            count=len(detections),
+            count=len(detection_ids),
         )
+        local_ids = [c.id for c in result.colonies]
         colony_ids = self.store.add_colonies(
-            self.run_id, image_id, [_colony_row(i, c) for i, c in enumerate(result.colonies)]
+            self.run_id,
+            image_id,
+            colony_rows(result.to_dict(), dict(zip(local_ids, detection_ids, strict=True))),
         )
-        id_of = dict(zip([c.id for c in result.colonies], colony_ids, strict=True))
+        id_of = dict(zip(local_ids, colony_ids, strict=True))
         planned = plan_picks(result.colonies, calibration, self.rules, result.dish)
         self.store.plan_picks(
             self.run_id,
@@ -349,13 +364,13 @@ class ColonyPickingRun:
         self.event(
             "picks.planned",
             f"{plate_name}: {len(planned)} picks planned",
-            plate=plate_name,
-            picks=len(planned),
+            data={"plate": plate_name, "picks": len(planned)},
         )
         return colony_ids
 
     # -- one pick ----------------------------------------------------------------------------
     def _do_pick(self, pick: Any) -> None:
+        """Pick one colony, deliver it, analyse it; each state is stored before the next step."""
         robot, analyzer, cfg = self.workcell.robot, self.workcell.analyzer, self.config.robot
         sample_id = f"R{self.run_id:04d}P{pick.id:05d}"
         started = time.perf_counter()
@@ -363,19 +378,21 @@ class ColonyPickingRun:
             self._pick_state(pick, PickState.MOVING, sample_id=sample_id)
             robot.pick(pick.deck_x_mm, pick.deck_y_mm, cfg.pick_z_mm, cfg.dwell_s)
             self._pick_state(pick, PickState.PICKED)
-            robot.deposit(cfg.deposit.x, cfg.deposit.y, cfg.deposit.z)
+            robot.deposit(cfg.deposit.x, cfg.deposit.y, cfg.deposit.z, cfg.dwell_s)
             self._pick_state(pick, PickState.DELIVERED)
             values = analyzer.analyze(sample_id, self.config.analyzer.analysis_timeout_s)
+            self.exchanges.flush()
             self.store.add_analyzer_result(pick.id, sample_id, values)
             self._pick_state(pick, PickState.ANALYZED)
         except DeviceError as exc:
             if self.control.estopped:
                 raise EmergencyStop("emergency stop") from exc
             self._pick_failed(pick, exc)
+        elapsed_ms = (time.perf_counter() - started) * 1000
         self.event(
             "pick.done",
-            f"pick {pick.id} finished in {(time.perf_counter() - started) * 1000:.0f} ms",
-            pick_id=pick.id,
+            f"pick {pick.id} finished in {elapsed_ms:.0f} ms",
+            data={"pick_id": pick.id, "ms": round(elapsed_ms, 1)},
         )
         final = self.store.get_pick(pick.id)
         self._hook("labauto_pick_finished", run_id=self.run_id, pick=final.to_dict())
@@ -383,20 +400,31 @@ class ColonyPickingRun:
     def _pick_state(self, pick: Any, state: PickState, **fields: Any) -> None:
         self.exchanges.flush()
         self.store.set_pick_state(pick.id, state, **fields)
-        self.event(
-            "pick.state", f"pick {pick.id}: {state.value}", pick_id=pick.id, state=state.value
-        )
+        self._notify("pick.state", f"pick {pick.id}: {state.value}")
 
     def _pick_failed(self, pick: Any, exc: DeviceError) -> None:
-        """Mark the pick failed and bring the device that failed back, or fail the run."""
+        """Mark the pick failed and bring the failed device back (if that fails, so does the run).
+
+        The robot is reconnected and homed (its position may be lost); the analyzer is
+        reconnected and reset. The pick itself is not retried: its probe may be spoiled.
+        """
+        self.exchanges.flush()
         self.store.set_pick_state(pick.id, PickState.FAILED, error=str(exc))
-        self._notify(
-            "pick.failed", f"pick {pick.id} failed: {exc}", pick_id=pick.id, error=str(exc)
-        )
-        device = self.workcell.robot if exc.device == "robot" else self.workcell.analyzer
-        device.recover()
         self.event(
-            f"{exc.device}.recovered", f"{exc.device} recovered after: {exc}", source=exc.device
+            "pick.failed",
+            f"pick {pick.id} failed: {exc}",
+            data={"pick_id": pick.id, "error": str(exc)},
+        )
+        if exc.device == self.workcell.analyzer.name:
+            self.workcell.analyzer.reconnect()
+            self.workcell.analyzer.reset()
+        else:
+            self.workcell.robot.reconnect()
+            self.workcell.robot.home()
+        self.event(
+            f"{exc.device}.recovered",
+            f"{exc.device} reconnected and reset after: {exc}",
+            source=exc.device,
         )
 
     # -- operator output ---------------------------------------------------------------------
@@ -407,34 +435,32 @@ class ColonyPickingRun:
 
         if not self.config.output.annotate:
             return
-        states = {pick.colony_id: pick.state for pick in self.store.picks_for_run(self.run_id)}
-        picked = {cid for cid, state in states.items() if state != PickState.PLANNED}
-        local_picked = {local for local, stored in id_of.items() if stored in picked}
-        write_plate_outputs(self.output_dir, plate_name, image, result, local_picked)
+        touched = {
+            pick.colony_id
+            for pick in self.store.picks_for_run(self.run_id)
+            if pick.state != PickState.PLANNED
+        }
+        picked = {local for local, stored in id_of.items() if stored in touched}
+        write_plate_outputs(self.output_dir, plate_name, image, result, picked)
 
 
-def _detection_row(index: int, colony: Any) -> dict[str, Any]:
+def _summary(info: dict[str, Any]) -> str:
+    """A one-line description of a device from its ``identify()`` dict."""
+    keys = ("kind", "model", "firmware", "firmware_version", "url", "endpoint", "state")
+    return ", ".join(f"{key} {info[key]}" for key in keys if info.get(key) not in (None, ""))
+
+
+def _detection_row(colony: Any, method: str) -> dict[str, Any]:
+    """The detection row of one object the plate analysis measured."""
     return {
-        "object_index": index,
-        "method": "plate",
+        "object_index": colony.id,
+        "method": method,
         "centroid_x": float(colony.centroid[0]),
         "centroid_y": float(colony.centroid[1]),
         "n_points": len(colony.contour),
         "closed": True,
         "d_alpha_median": float(colony.d_alpha_median),
+        "centroid_inside": True,
         "is_des": colony.klass != "merged",
         "area_px": float(colony.area_px),
-    }
-
-
-def _colony_row(index: int, colony: Any) -> dict[str, Any]:
-    return {
-        "colony_index": index,
-        "klass": colony.klass,
-        "centroid_x": float(colony.centroid[0]),
-        "centroid_y": float(colony.centroid[1]),
-        "area_px": float(colony.area_px),
-        "d_alpha_median": float(colony.d_alpha_median),
-        "estimated_count": int(colony.estimated_count),
-        "contour": np.asarray(colony.contour).round(2).tolist(),
     }

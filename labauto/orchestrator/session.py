@@ -137,13 +137,15 @@ def describe_run(store: Store, run_id: int, n_events: int = 15) -> dict[str, Any
     run = store.get_run(run_id)
     picks = store.picks_for_run(run_id)
     results = {r.pick_id: r.values for r in store.analyzer_results(run_id)}
-    pick_rows = [{**p.to_dict(), "result": results.get(p.id)} for p in picks]
+    pick_rows = [
+        {**p.to_dict(), "result": results.get(p.id)} for p in sorted(picks, key=lambda p: p.id)
+    ]
     summary = store.run_summary(run_id)
     return {
         "run": run.to_dict(),
         "plates": store.plate_names(run_id),
-        "colonies": store.colony_counts(run_id),
-        "picks_by_state": dict(summary.picks_by_state),
+        "colonies": {str(k): v for k, v in store.colony_counts(run_id).items()},
+        "picks_by_state": {str(k): v for k, v in summary.picks_by_state.items()},
         "attention": [p for p in pick_rows if p["needs_attention"]],
         "picks": pick_rows,
         "events": [e.to_dict() for e in store.latest_events(run_id, n_events)],

@@ -23,7 +23,7 @@ _DETECTION_COPIED = (
     "n_points", "closed", "d_alpha_median", "d_alpha_mean", "centroid_inside", "is_des",
     "shape", "ellipse", "area_px",
 )  # fmt: skip
-_COLONY_COPIED = ("klass", "area_px", "d_alpha_median", "estimated_count", "mix_score", "contour")
+_COLONY_COPIED = ("area_px", "d_alpha_median", "estimated_count", "mix_score", "contour")
 
 
 def _centroid(obj: Mapping[str, Any], where: str) -> tuple[float, float]:
@@ -81,8 +81,9 @@ def colony_rows(
     ----------
     colonies : sequence of mappings, or a mapping with ``"colonies"``
         ``PlateResult.to_dict()`` or its ``"colonies"`` list: ``[{"id", "centroid": [x, y],
-        "klass", "area_px", "d_alpha_median", "estimated_count", "mix_score",
-        "contour"}, ...]``. A colony's ``id`` becomes ``colony_index``.
+        "class", "area_px", "d_alpha_median", "estimated_count", "mix_score",
+        "contour"}, ...]``. A colony's ``id`` becomes ``colony_index`` and its ``class`` the
+        column ``klass``.
     detection_ids : mapping of int to int, optional
         Colony ``id`` -> stored detection id, to link colonies to their detections.
 
@@ -101,7 +102,14 @@ def colony_rows(
         if "id" not in colony:
             raise InvalidValue(f"{where}: missing 'id'")
         x, y = _centroid(colony, where)
-        row = {"colony_index": colony["id"], "centroid_x": x, "centroid_y": y}
+        if "class" not in colony:
+            raise InvalidValue(f"{where}: missing 'class'")
+        row = {
+            "colony_index": colony["id"],
+            "klass": colony["class"],
+            "centroid_x": x,
+            "centroid_y": y,
+        }
         row.update((key, colony[key]) for key in _COLONY_COPIED if key in colony)
         if detection_ids is not None and colony["id"] in detection_ids:
             row["detection_id"] = detection_ids[colony["id"]]

@@ -284,7 +284,7 @@ class Colony:
         return {
             "id": self.id,
             "centroid": [round(float(self.centroid[0]), 3), round(float(self.centroid[1]), 3)],
-            "klass": self.klass,
+            "class": self.klass,
             "area_px": float(self.area_px),
             "d_alpha_median": round(float(self.d_alpha_median), 3),
             "estimated_count": int(self.estimated_count),

@@ -71,11 +71,11 @@ def test_json_contract(analysed: list) -> None:
     assert (data["width"], data["height"]) == (1280, 1024)
     assert set(data["dish"]) == {"center", "radius"} and len(data["dish"]["center"]) == 2
     assert set(data["counts"]) == {"authentic", "merged", "mixed", "colonies_estimate"}
-    assert data["counts"]["authentic"] == sum(c["klass"] == "authentic" for c in data["colonies"])
+    assert data["counts"]["authentic"] == sum(c["class"] == "authentic" for c in data["colonies"])
     colony = data["colonies"][0]
-    for key in ("id", "centroid", "klass", "area_px", "d_alpha_median", "estimated_count"):
+    for key in ("id", "centroid", "class", "area_px", "d_alpha_median", "estimated_count"):
         assert key in colony
-    assert colony["klass"] in ("authentic", "merged", "mixed")
+    assert colony["class"] in ("authentic", "merged", "mixed")
     contour = np.asarray(colony["contour"])
     assert contour.ndim == 2 and contour.shape[1] == 2
     assert [c["id"] for c in data["colonies"]] == list(range(len(data["colonies"])))

@@ -48,7 +48,7 @@ PLATE_JSON = {
         {
             "id": 0,
             "centroid": [80.0, 100.0],
-            "klass": "authentic",
+            "class": "authentic",
             "area_px": 3200.0,
             "d_alpha_median": 4.1,
             "estimated_count": 1,
@@ -58,7 +58,7 @@ PLATE_JSON = {
         {
             "id": 1,
             "centroid": [210.0, 90.0],
-            "klass": "merged",
+            "class": "merged",
             "area_px": 5100.0,
             "d_alpha_median": 22.0,
             "estimated_count": 2,
