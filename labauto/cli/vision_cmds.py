@@ -25,9 +25,8 @@ def detect_cmd(image: str, method: str | None, as_json: bool, config: Config) ->
     from labauto.api import detect
 
     plugins = load_plugins(config.plugins.enabled, config.plugins.disabled)
-    params = detector_params(config)
-    method = method or config.segmenter
-    result = detect(image, method, plugins=plugins, **{**vars(params), "method": method})
+    params = {k: v for k, v in vars(detector_params(config)).items() if k != "method"}
+    result = detect(image, method or config.segmenter, plugins=plugins, **params)
     if as_json:
         _echo_json(result.to_dict())
         return

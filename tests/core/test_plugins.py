@@ -13,10 +13,10 @@ import sys
 
 import numpy as np
 import pytest
-from labauto.synthetic.shapes import ellipse, render
 
 from labauto import hookspecs
 from labauto.plugin_manager import load_plugins
+from labauto.synthetic.shapes import ellipse, render
 
 labauto_sample_plugin = pytest.importorskip(
     "labauto_sample_plugin", reason="install tests/sample_plugin (make install)"
