@@ -166,6 +166,7 @@ class ColonyPickingRun:
         self.reporter = reporter
         self.output_dir = Path(config.output.dir) / f"run-{run_id:04d}"
         self.exchanges = ExchangeLog(store, run_id)
+        self.plate_params = plate_params(config)
         self.rules = PickRules(
             max_picks=config.picking.max_picks,
             min_neighbor_distance_px=config.picking.min_neighbor_distance_px,
@@ -293,7 +294,7 @@ class ColonyPickingRun:
     # -- one plate ---------------------------------------------------------------------------
     def _process_plate(self, plate_name: str, image: np.ndarray, calibration: Calibration) -> None:
         application = self.plugins.registry.get("applications", "plate")
-        result = application(image, plate_params(self.config))
+        result = application(image, self.plate_params)
         plate = self.store.add_plate(plate_name, source=self.config.camera.path)
         stored = self.store.add_image(
             plate.id,
@@ -303,26 +304,28 @@ class ColonyPickingRun:
             sha256=image_digest(image),
             run_id=self.run_id,
         )
-        colony_ids = self.store.colony_ids_for_image(self.run_id, stored.id)
-        if colony_ids:
+        if self.store.colony_ids_for_image(self.run_id, stored.id):
             self.event(
                 "plate.resumed",
                 f"{plate_name}: colonies already stored, not re-stored",
                 data={"plate": plate_name},
             )
         else:
-            colony_ids = self._store_plate(plate_name, stored.id, result, calibration)
-        id_of = dict(zip([c.id for c in result.colonies], colony_ids, strict=True))
+            self._store_plate(plate_name, stored.id, result, calibration)
+        # stored colony id by the plate result's colony id (its colony_index)
+        id_of = {c.colony_index: c.id for c in self.store.colonies(self.run_id, stored.id)}
         self._write_outputs(plate_name, image, result, id_of)
+        on_this_plate = set(id_of.values())
         for pick in self.store.picks_for_run(self.run_id):
-            if pick.colony_id in colony_ids and pick.state == PickState.PLANNED:
+            if pick.colony_id in on_this_plate and pick.state == PickState.PLANNED:
                 self._checkpoint()
                 self._do_pick(pick)
         self._write_outputs(plate_name, image, result, id_of)
 
     def _store_plate(
         self, plate_name: str, image_id: int, result: Any, calibration: Calibration
-    ) -> list[int]:
+    ) -> None:
+        """Store a plate's detections and colonies and plan its picks."""
         counts = result.counts
         self.event(
             "plate.analyzed",
@@ -330,7 +333,7 @@ class ColonyPickingRun:
             f"{counts['mixed']} mixed ({result.timing_ms:.1f} ms)",
             data={"plate": plate_name, **counts},
         )
-        method = f"plate:{plate_params(self.config).method}"
+        method = f"plate:{self.plate_params.method}"
         detection_ids = self.store.add_detections(
             self.run_id, image_id, [_detection_row(c, method) for c in result.colonies]
         )
@@ -366,7 +369,6 @@ class ColonyPickingRun:
             f"{plate_name}: {len(planned)} picks planned",
             data={"plate": plate_name, "picks": len(planned)},
         )
-        return colony_ids
 
     # -- one pick ----------------------------------------------------------------------------
     def _do_pick(self, pick: Any) -> None:
