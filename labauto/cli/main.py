@@ -11,6 +11,7 @@ import sys
 import click
 
 from labauto import __version__
+from labauto.drivers.errors import DeviceError
 from labauto.errors import LabautoError
 
 
@@ -53,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     except click.exceptions.Abort:
         click.echo("labauto: aborted", err=True)
         return 130
-    except (LabautoError, ValueError, OSError) as exc:
+    except (LabautoError, DeviceError, ValueError, OSError) as exc:
         if debug:
             raise
         click.echo(f"labauto: error: {exc}", err=True)

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from labauto.errors import LabautoError
 
-class StoreError(Exception):
-    """Base class for every storage failure."""
+
+class StoreError(LabautoError):
+    """Base class for every storage failure (a ``LabautoError``: the CLI shows it as one line)."""
 
 
 class DatabaseUnavailable(StoreError):

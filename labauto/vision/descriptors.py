@@ -413,3 +413,228 @@ def _extent_axes(points: np.ndarray, centroid: np.ndarray) -> tuple[float, float
 def _json_float(value: float) -> float | None:
     value = float(value)
     return value if math.isfinite(value) else None
+
+
+# ------------------------------------------------------------------------- many contours
+
+
+@dataclass(frozen=True)
+class DescriptorArrays:
+    """The descriptors of K contours that :func:`labauto.vision.harmonics.classify_shapes`
+    needs (arrays of length K; definitions as in :class:`ShapeDescriptors`).
+
+    Attributes
+    ----------
+    valid : np.ndarray
+        (K,) bool; False where :func:`shape_descriptors` would raise (fewer than 3 points or
+        fewer than 2 distinct ones). The other arrays hold NaN there.
+    area : np.ndarray
+        (K,) absolute polygon area (closed by the chord), 0 for a polygon without area.
+    centroid : np.ndarray
+        (K, 2) centre of gravity (area centroid, or the curve centroid without area).
+    semi_major, semi_minor : np.ndarray
+        (K,) semi-axes ``a >= b`` from the second moments (``axes="moments"``).
+    elongation : np.ndarray
+        (K,) long over short side of the minimum-area box (``inf`` for a line).
+    rectangularity : np.ndarray
+        (K,) area over the minimum-area box's area.
+    """
+
+    valid: np.ndarray
+    area: np.ndarray
+    centroid: np.ndarray
+    semi_major: np.ndarray
+    semi_minor: np.ndarray
+    elongation: np.ndarray
+    rectangularity: np.ndarray
+
+
+def drop_repeated_points_batch(
+    points: np.ndarray, offsets: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`drop_repeated_points` (``closed=True``) of K concatenated contours at once.
+
+    Parameters
+    ----------
+    points : np.ndarray
+        (N, 2) float points of all contours, contour k is ``points[offsets[k]:offsets[k + 1]]``.
+    offsets : np.ndarray
+        (K + 1,) int offsets, every contour with at least one point.
+
+    Returns
+    -------
+    points, offsets
+        The contours without points equal to their predecessor and without a last point equal
+        to the first.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    off = np.asarray(offsets, dtype=np.int64)
+    keep = np.ones(len(pts), dtype=bool)
+    keep[1:] = np.any(pts[1:] != pts[:-1], axis=1)
+    keep[off[:-1]] = True  # a contour's first point has no predecessor
+    counts = np.add.reduceat(keep.astype(np.int64), off[:-1]) if len(pts) else off[1:] * 0
+    pts = pts[keep]
+    off = np.concatenate(([0], np.cumsum(counts)))
+    wrap = (counts > 1) & np.all(pts[off[:-1]] == pts[np.maximum(off[1:] - 1, 0)], axis=1)
+    if wrap.any():
+        keep = np.ones(len(pts), dtype=bool)
+        keep[off[1:][wrap] - 1] = False
+        pts = pts[keep]
+        off = np.concatenate(([0], np.cumsum(counts - wrap)))
+    return pts, off
+
+
+def shape_descriptors_batch(points: np.ndarray, offsets: np.ndarray) -> DescriptorArrays:
+    """The label descriptors of :func:`shape_descriptors` for K contours at once.
+
+    Area, centroid and second moments are per-contour sums over the edges
+    (``np.add.reduceat``); the minimum-area box is ``cv2.minAreaRect`` per contour (rotating
+    calipers on the convex hull, a few microseconds each). Perimeter, compactness, roundness
+    and bending energy are left out (the shape label does not use them).
+
+    Parameters
+    ----------
+    points : np.ndarray
+        (N, 2) finite float points of all contours, in order.
+    offsets : np.ndarray
+        (K + 1,) int; contour k is ``points[offsets[k]:offsets[k + 1]]``.
+
+    Returns
+    -------
+    DescriptorArrays
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    off = np.asarray(offsets, dtype=np.int64)
+    k = len(off) - 1
+    nan = np.full(k, np.nan)
+    out = DescriptorArrays(
+        np.zeros(k, bool), nan.copy(), np.full((k, 2), np.nan), nan.copy(), nan.copy(),
+        nan.copy(), nan.copy(),
+    )  # fmt: skip
+    use = np.diff(off) >= 3
+    if not use.any():
+        return out
+    sub = np.repeat(use, np.diff(off))
+    q, q_off = drop_repeated_points_batch(
+        pts[sub], np.concatenate(([0], np.cumsum(np.diff(off)[use])))
+    )
+    counts = np.diff(q_off)
+    distinct = counts >= 2
+    idx = np.flatnonzero(use)[distinct]
+    if not distinct.all():
+        sub = np.repeat(distinct, counts)
+        q, counts = q[sub], counts[distinct]
+        q_off = np.concatenate(([0], np.cumsum(counts)))
+    out.valid[idx] = True
+    starts = q_off[:-1]
+    owner = np.repeat(np.arange(len(counts)), counts)
+    nxt = np.arange(1, len(q) + 1)
+    nxt[q_off[1:] - 1] = starts  # the last point joins the first
+
+    area, centroid, mean = _polygon_area_centroids(q, q_off, owner, nxt)
+    px, py = q[:, 0] - mean[owner, 0], q[:, 1] - mean[owner, 1]
+    qx, qy = px[nxt], py[nxt]
+    seg_len = np.hypot(qx - px, qy - py)
+    length = np.add.reduceat(seg_len, starts)
+    has_area = 4.0 * math.pi * area > _NO_AREA_COMPACTNESS * length**2
+    if not has_area.all():  # no area (a traced line): the curve centroid (_curve_centroid)
+        mid_x, mid_y = 0.5 * (q[:, 0] + q[nxt, 0]), 0.5 * (q[:, 1] + q[nxt, 1])
+        curve = np.column_stack(
+            (np.add.reduceat(mid_x * seg_len, starts), np.add.reduceat(mid_y * seg_len, starts))
+        ) / np.where(length > 0, length, 1.0)[:, None]
+        centroid = np.where(has_area[:, None], centroid, curve)
+        area = np.where(has_area, area, 0.0)
+
+    # second moments about the centroid (_moment_axes)
+    px, py = q[:, 0] - centroid[owner, 0], q[:, 1] - centroid[owner, 1]
+    qx, qy = px[nxt], py[nxt]
+    xx = px * px + px * qx + qx * qx
+    yy = py * py + py * qy + qy * qy
+    xy = 2.0 * px * py + px * qy + qx * py + 2.0 * qx * qy
+    cross = px * qy - qx * py
+    area2 = np.add.reduceat(cross, starts)
+    area2 = np.where(has_area, area2, 1.0)
+    weight = np.where(has_area[owner], cross, seg_len / np.where(length > 0, length, 1.0)[owner])
+    sxx = np.add.reduceat(weight * xx, starts)
+    syy = np.add.reduceat(weight * yy, starts)
+    sxy = np.add.reduceat(weight * xy, starts)
+    sxx = np.where(has_area, sxx / (6.0 * area2), sxx / 3.0)
+    syy = np.where(has_area, syy / (6.0 * area2), syy / 3.0)
+    sxy = np.where(has_area, sxy / (12.0 * area2), sxy / 6.0)
+    scale = np.where(has_area, 4.0, 3.0)
+    half_trace = 0.5 * (sxx + syy)
+    root = np.hypot(0.5 * (sxx - syy), sxy)
+    major2 = scale * (half_trace + root)
+    # a self-intersecting polygon can have a negative "variance": shape_descriptors raises
+    out.valid[idx[major2 < 0]] = False
+    out.semi_major[idx] = np.sqrt(np.maximum(major2, 0.0))
+    out.semi_minor[idx] = np.sqrt(scale * np.maximum(half_trace - root, 0.0))
+
+    # minimum-area box (min_area_box of the convex hull), centred for float32
+    centred = np.empty((len(q), 2), np.float32)
+    centred[:, 0], centred[:, 1] = q[:, 0] - mean[owner, 0], q[:, 1] - mean[owner, 1]
+    bounds = zip(starts.tolist(), q_off[1:].tolist(), strict=True)
+    sides = np.array([cv2.minAreaRect(centred[s:e])[1] for s, e in bounds], np.float64)
+    sides = sides.reshape(-1, 2)
+    long, short = sides.max(axis=1), sides.min(axis=1)
+    boxed = short > 1e-12 * long
+    box_area = np.where(boxed, long * short, 0.0)
+    out.elongation[idx] = np.where(boxed, long / np.where(boxed, short, 1.0), np.inf)
+    out.rectangularity[idx] = np.where(
+        box_area > 0, np.minimum(area / np.where(box_area > 0, box_area, 1.0), 1.0), 0.0
+    )
+    out.area[idx] = area
+    out.centroid[idx] = centroid
+    return out
+
+
+def polygon_area_centroid_batch(
+    points: np.ndarray, offsets: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`polygon_area_centroid` of K concatenated polygons at once.
+
+    Parameters
+    ----------
+    points : np.ndarray
+        (N, 2) float vertices; polygon k is ``points[offsets[k]:offsets[k + 1]]`` (implicitly
+        closed), each with at least one vertex.
+    offsets : np.ndarray
+        (K + 1,) int offsets.
+
+    Returns
+    -------
+    area : np.ndarray
+        (K,) absolute areas.
+    centroid : np.ndarray
+        (K, 2) area centroids (the vertex mean where the area is zero).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    off = np.asarray(offsets, dtype=np.int64)
+    counts = np.diff(off)
+    owner = np.repeat(np.arange(len(counts)), counts)
+    nxt = np.arange(1, len(pts) + 1)
+    nxt[off[1:] - 1] = off[:-1]
+    area, centroid, _ = _polygon_area_centroids(pts, off, owner, nxt)
+    return area, centroid
+
+
+def _polygon_area_centroids(
+    pts: np.ndarray, off: np.ndarray, owner: np.ndarray, nxt: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Areas, area centroids and vertex means of K polygons (``nxt``: index of the next vertex)."""
+    starts = off[:-1]
+    counts = np.diff(off)
+    mean = np.column_stack(
+        (np.add.reduceat(pts[:, 0], starts), np.add.reduceat(pts[:, 1], starts))
+    )
+    mean /= counts[:, None]
+    px, py = pts[:, 0] - mean[owner, 0], pts[:, 1] - mean[owner, 1]
+    qx, qy = px[nxt], py[nxt]
+    cross = px * qy - qx * py
+    signed_area = 0.5 * np.add.reduceat(cross, starts)
+    has_area = signed_area != 0.0
+    six_area = np.where(has_area, 6.0 * signed_area, 1.0)
+    cx = np.add.reduceat((px + qx) * cross, starts) / six_area
+    cy = np.add.reduceat((py + qy) * cross, starts) / six_area
+    centroid = mean + np.where(has_area[:, None], np.column_stack((cx, cy)), 0.0)
+    return np.abs(signed_area), centroid, mean

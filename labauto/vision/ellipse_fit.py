@@ -171,19 +171,30 @@ def _algebraic_batch(points: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarra
 
     starts = offsets[:-1]
     owner = np.repeat(np.arange(k), counts)
-    mean = np.add.reduceat(points, starts, axis=0) / counts[:, None]
-    centred = points - mean[owner]
-    scale = np.sqrt(np.add.reduceat((centred**2).sum(axis=1), starts) / (2.0 * counts))
+    x, y = points[:, 0], points[:, 1]
+    mean = np.column_stack((np.add.reduceat(x, starts), np.add.reduceat(y, starts)))
+    mean /= counts[:, None]
+    x, y = x - mean[owner, 0], y - mean[owner, 1]
+    scale = np.sqrt(np.add.reduceat(x * x + y * y, starts) / (2.0 * counts))
     scale = np.where(scale > 0, scale, 1.0)
-    x = centred[:, 0] / scale[owner]
-    y = centred[:, 1] / scale[owner]
-    design = np.column_stack((x * x, x * y, y * y, x, y, np.ones_like(x)))
-    scatter = (
-        np.add.reduceat(
-            (design[:, :, None] * design[:, None, :]).reshape(-1, 36), starts, axis=0
-        ).reshape(k, 6, 6)
-        / counts[:, None, None]
-    )
+    inv = (1.0 / scale)[owner]
+    x *= inv
+    y *= inv
+    # The scatter of the design rows (x^2, xy, y^2, x, y, 1) holds only 14 distinct moments
+    # x^i y^j (1 <= i + j <= 4) besides the count: sum each once per contour.
+    xx, xy, yy = x * x, x * y, y * y
+    monomials = {
+        (1, 0): x, (0, 1): y, (2, 0): xx, (1, 1): xy, (0, 2): yy,
+        (3, 0): xx * x, (2, 1): xx * y, (1, 2): x * yy, (0, 3): yy * y,
+        (4, 0): xx * xx, (3, 1): xx * xy, (2, 2): xx * yy, (1, 3): xy * yy, (0, 4): yy * yy,
+    }  # fmt: skip
+    moments = {key: np.add.reduceat(m, starts) / counts for key, m in monomials.items()}
+    moments[0, 0] = np.ones(k)
+    exponents = ((2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0))
+    scatter = np.empty((k, 6, 6))
+    for i, (ei, fi) in enumerate(exponents):
+        for j, (ej, fj) in enumerate(exponents[i:], start=i):
+            scatter[:, i, j] = scatter[:, j, i] = moments[ei + ej, fi + fj]
     return _solve_scatter(scatter, mean, scale)
 
 
@@ -405,61 +416,122 @@ def _levenberg_marquardt(
     they lower the cost; when one does not, Marquardt damping ``lam * diag(J^T J)`` is switched
     on and raised tenfold until a step succeeds, and lowered after every success. The contact
     roots of the last accepted parameters seed the next evaluation (2 Newton steps typical).
+    Only the points of contours still iterating are evaluated: the working set shrinks as
+    contours converge.
 
     Returns (K, 5) parameters (angle in degrees), (K,) rms, iterations and converged flags.
     """
     k = len(start)
     counts = np.diff(offsets)
-    starts = offsets[:-1]
-    owner = np.repeat(np.arange(k), counts)
     p = start.astype(np.float64).copy()
     p[:, 4] = np.radians(p[:, 4])
-    dist, jac, roots = _distances_and_jacobian(pts, p[owner])
-    cost = np.add.reduceat(dist * dist, starts)
     lam = np.zeros(k)
     iterations = np.zeros(k, dtype=int)
     converged = np.zeros(k, dtype=bool)
     active = np.ones(k, dtype=bool) if max_iter > 0 else np.zeros(k, dtype=bool)
+    # the working set: contours ``ids`` and their points, contour by contour
+    ids = np.arange(k)
+    w_counts = counts
+    w_starts = offsets[:-1]
+    local = np.repeat(ids, counts)
+    x = np.ascontiguousarray(pts[:, 0])
+    y = np.ascontiguousarray(pts[:, 1])
+    dist, jac, roots = _residuals(x, y, p, local)
+    cost = np.add.reduceat(dist * dist, w_starts)
     rows, cols = np.triu_indices(5)
+    diagonal = np.arange(5)
     while active.any():
-        iterations += active
-        # per-contour normal equations from the upper triangle of J^T J
-        hess_upper = np.add.reduceat(jac[:, rows] * jac[:, cols], starts)
-        hess = np.empty((k, 5, 5))
-        hess[:, rows, cols] = hess_upper
-        hess[:, cols, rows] = hess_upper
-        grad = np.add.reduceat(jac * dist[:, None], starts)
-        diag = hess[:, np.arange(5), np.arange(5)]
+        keep = active[ids]
+        if not keep.all():  # drop the points of contours that stopped
+            on_points = np.repeat(keep, w_counts)
+            x, y, dist, roots = x[on_points], y[on_points], dist[on_points], roots[on_points]
+            jac = jac[:, on_points]
+            ids, w_counts = ids[keep], w_counts[keep]
+            w_starts = np.concatenate(([0], np.cumsum(w_counts)[:-1]))
+            local = np.repeat(np.arange(len(ids)), w_counts)
+        iterations[ids] += 1
+        # per-contour normal equations J^T J (upper triangle) and J^T d in one reduction
+        terms = np.empty((20, len(dist)))
+        np.multiply(jac[rows], jac[cols], out=terms[:15])
+        np.multiply(jac, dist, out=terms[15:])
+        sums = np.add.reduceat(terms, w_starts, axis=1).T
+        hess = np.empty((len(ids), 5, 5))
+        hess[:, rows, cols] = sums[:, :15]
+        hess[:, cols, rows] = sums[:, :15]
+        grad = sums[:, 15:]
+        diag = hess[:, diagonal, diagonal]
+        w_lam = lam[ids]
         # a tiny ridge keeps the angle column solvable for a circle (where it is zero)
-        hess[:, np.arange(5), np.arange(5)] += lam[:, None] * diag + 1e-12 * diag.sum(
+        hess[:, diagonal, diagonal] += w_lam[:, None] * diag + 1e-12 * diag.sum(
             axis=1, keepdims=True
         )
         step = -np.linalg.solve(hess, grad[:, :, None])[:, :, 0]
-        step[~active] = 0.0
-        size = np.maximum(np.maximum(p[:, 2], p[:, 3]), 1.0)
+        w_p = p[ids]
+        size = np.maximum(np.maximum(w_p[:, 2], w_p[:, 3]), 1.0)
         step_px = np.sqrt((step[:, :4] ** 2).sum(axis=1) + (size * step[:, 4]) ** 2)
-        trial = p + step
+        trial = w_p + step
         valid = np.isfinite(trial).all(axis=1) & (trial[:, 2] > 0) & (trial[:, 3] > 0)
-        trial[~valid] = p[~valid]
-        dist_t, jac_t, roots_t = _distances_and_jacobian(pts, trial[owner], roots)
-        cost_t = np.where(valid, np.add.reduceat(dist_t * dist_t, starts), np.inf)
+        trial[~valid] = w_p[~valid]
+        dist_t, jac_t, roots_t = _residuals(x, y, trial, local, roots)
+        cost_t = np.where(valid, np.add.reduceat(dist_t * dist_t, w_starts), np.inf)
 
+        w_cost = cost[ids]
         small_step = step_px <= tol * size
-        accept = active & (cost_t <= cost)
-        small_gain = accept & (lam == 0.0) & (cost - cost_t <= tol * cost)
-        p[accept] = trial[accept]
-        cost[accept] = cost_t[accept]
-        moved = accept[owner]
-        dist[moved], jac[moved], roots[moved] = dist_t[moved], jac_t[moved], roots_t[moved]
-        lam = np.where(accept, np.where(lam <= 1e-6, 0.0, lam / 10.0), lam)
-        reject = active & ~accept & ~small_step
-        lam = np.where(reject, np.where(lam == 0.0, 1e-3, lam * 10.0), lam)
-        done = active & ((accept & (small_step | small_gain)) | (~accept & small_step))
-        converged |= done
-        active &= ~done & (lam <= 1e12) & (iterations < max_iter)
+        accept = cost_t <= w_cost
+        small_gain = accept & (w_lam == 0.0) & (w_cost - cost_t <= tol * w_cost)
+        p[ids[accept]] = trial[accept]
+        cost[ids[accept]] = cost_t[accept]
+        if accept.all():
+            dist, jac, roots = dist_t, jac_t, roots_t
+        elif accept.any():
+            moved = np.repeat(accept, w_counts)
+            dist = np.where(moved, dist_t, dist)
+            jac = np.where(moved, jac_t, jac)
+            roots = np.where(moved, roots_t, roots)
+        w_lam = np.where(accept, np.where(w_lam <= 1e-6, 0.0, w_lam / 10.0), w_lam)
+        reject = ~accept & ~small_step
+        w_lam = np.where(reject, np.where(w_lam == 0.0, 1e-3, w_lam * 10.0), w_lam)
+        lam[ids] = w_lam
+        done = (accept & (small_step | small_gain)) | (~accept & small_step)
+        converged[ids] |= done
+        active[ids] = ~done & (w_lam <= 1e12) & (iterations[ids] < max_iter)
     p[:, 4] = np.degrees(p[:, 4])
     rms = np.sqrt(cost / counts)
     return p, rms, iterations, converged
+
+
+def _residuals(
+    x: np.ndarray,
+    y: np.ndarray,
+    params: np.ndarray,
+    local: np.ndarray,
+    roots: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_distances_and_jacobian` for K contours: point i belongs to contour ``local[i]``.
+
+    ``params`` is (K, 5) ``xc, yc, a, b, angle_rad``; the angle's sine and cosine are taken
+    once per contour. Returns the (n,) distances, the (5, n) Jacobian (one row per parameter,
+    so the normal equations reduce along contiguous rows) and the contact roots.
+    """
+    xc, yc, a, b, alpha = params.T
+    c, s = np.cos(alpha)[local], np.sin(alpha)[local]
+    a, b = a[local], b[local]
+    dx, dy = x - xc[local], y - yc[local]
+    u = c * dx + s * dy  # point in the ellipse frame
+    v = c * dy - s * dx
+    fu, fv, roots = _contact(u, v, a, b, roots)
+    nu, nv = fu / (a * a), fv / (b * b)  # outward normal (unnormalised) in the ellipse frame
+    norm = np.hypot(nu, nv)
+    nu /= norm
+    nv /= norm
+    dist = nu * (u - fu) + nv * (v - fv)
+    jac = np.empty((5, len(x)))
+    jac[0] = s * nv - c * nu  # -n_world . e_x
+    jac[1] = -(s * nu + c * nv)
+    jac[2] = -nu * fu / a
+    jac[3] = -nv * fv / b
+    jac[4] = nu * fv - nv * fu
+    return dist, jac, roots
 
 
 def _distances_and_jacobian(
@@ -541,21 +613,24 @@ def _contact(
         guess = 0.5 * (x * qx + y * qy - 1.0) / (qx * qx + qy * qy)
     # One Newton step from the guess lands left of the root from either side (F is convex);
     # the safe start replaces it if better. From there Newton is monotone and cannot overshoot.
+    # Every point iterates until its own step is negligible; the ones still moving go on alone.
     s = np.maximum(guess, safe)
-    for first in (True, False):
-        pa, pb = s + a2, s + b2
-        ra, rb = ax / pa, by / pb
-        ra2, rb2 = ra * ra, rb * rb
-        step = (ra2 + rb2 - 1.0) / (2.0 * (ra2 / pa + rb2 / pb))
-        s = np.maximum(s + step, safe) if first else s + step
+    s = np.maximum(s + _newton_step(s, ax, by, a2, b2), safe)
+    idx = None  # all points
+    cur = (s, ax, by, a2, b2)
     for _ in range(_MAX_NEWTON):
-        pa, pb = s + a2, s + b2
-        ra, rb = ax / pa, by / pb
-        ra2, rb2 = ra * ra, rb * rb
-        step = (ra2 + rb2 - 1.0) / (2.0 * (ra2 / pa + rb2 / pb))
-        s = s + step
-        if np.all(np.abs(step) <= 1e-12 * (np.abs(s) + b2)):
+        s_cur, ax_cur, by_cur, a2_cur, b2_cur = cur
+        step = _newton_step(s_cur, ax_cur, by_cur, a2_cur, b2_cur)
+        s_cur = s_cur + step
+        if idx is None:
+            s = s_cur
+        else:
+            s[idx] = s_cur
+        busy = np.abs(step) > 1e-12 * (np.abs(s_cur) + b2_cur)
+        if not busy.any():
             break
+        idx = np.flatnonzero(busy) if idx is None else idx[busy]
+        cur = (s_cur[busy], ax_cur[busy], by_cur[busy], a2_cur[busy], b2_cur[busy])
     cu = a2 * x / (s + a2)
     cv = b2 * y / (s + b2)
     if any_inner:
@@ -567,6 +642,16 @@ def _contact(
         s[inner] = -bi * bi
     cu, cv = np.where(swap, cv, cu), np.where(swap, cu, cv)
     return np.copysign(cu, u), np.copysign(cv, v), s
+
+
+def _newton_step(
+    s: np.ndarray, ax: np.ndarray, by: np.ndarray, a2: np.ndarray, b2: np.ndarray
+) -> np.ndarray:
+    """Newton step ``-F(s) / F'(s)`` for the contact root (module docstring)."""
+    pa, pb = s + a2, s + b2
+    ra, rb = ax / pa, by / pb
+    ra2, rb2 = ra * ra, rb * rb
+    return (ra2 + rb2 - 1.0) / (2.0 * (ra2 / pa + rb2 / pb))
 
 
 # ----------------------------------------------------------------------------- robust

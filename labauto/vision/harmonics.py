@@ -37,8 +37,11 @@ from labauto.vision.descriptors import (
     ShapeDescriptors,
     as_contour,
     drop_repeated_points,
+    drop_repeated_points_batch,
     polygon_area_centroid,
+    polygon_area_centroid_batch,
     shape_descriptors,
+    shape_descriptors_batch,
 )
 
 SHAPE_LABELS = ("circle", "ellipse", "des", "triangle", "rectangle", "line", "other")
@@ -415,3 +418,202 @@ def _polar_series(
     coeffs /= math.pi * winding
     coeffs[0] = coeffs[0].real
     return coeffs, star_shapedness
+
+
+# ------------------------------------------------------------------------- many contours
+
+
+def classify_shapes(
+    points: np.ndarray,
+    offsets: np.ndarray,
+    *,
+    d_alpha: np.ndarray,
+    centroid_inside: np.ndarray,
+    des_threshold_deg: float = 30.0,
+    centroids: np.ndarray | None = None,
+    thresholds: ClassifierThresholds | None = None,
+) -> list[str | None]:
+    """:func:`classify_shape` for K contours at once, vectorised over all their points.
+
+    The same decision rule on the same features: the descriptors come from
+    :func:`~labauto.vision.descriptors.shape_descriptors_batch` (one ``cv2.minAreaRect`` per
+    contour, everything else per-contour sums), the polar series of ``r`` (harmonics 0-3, all
+    the rule reads) and ``r^-2`` (0-8) from one pass over all edges of all contours. Results
+    equal :func:`classify_shape`'s up to floating-point rounding. (``closed`` is not an
+    argument: the label does not depend on it.)
+
+    Parameters
+    ----------
+    points : np.ndarray
+        (N, 2) ordered contour points ``(x, y)`` of all contours, concatenated.
+    offsets : np.ndarray
+        (K + 1,) int; contour k is ``points[offsets[k]:offsets[k + 1]]``.
+    d_alpha : np.ndarray
+        (K,) shape angles D_alpha in degrees.
+    centroid_inside : np.ndarray
+        (K,) bool results of the point-in-polygon test of the centroids.
+    des_threshold_deg : float
+        D_alpha threshold of a DES, degrees.
+    centroids : np.ndarray, optional
+        (K, 2) centres of gravity; by default the area centroids of the polygons.
+    thresholds : ClassifierThresholds, optional
+        Override the decision thresholds.
+
+    Returns
+    -------
+    list of str or None
+        One of :data:`SHAPE_LABELS` per contour; None where :func:`classify_shape` raises
+        ValueError (fewer than 3 points, fewer than 2 distinct ones, a non-finite point or
+        ``d_alpha``).
+    """
+    th = thresholds or ClassifierThresholds()
+    pts = np.asarray(points, dtype=np.float64)
+    off = np.asarray(offsets, dtype=np.int64)
+    k = len(off) - 1
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise ValueError(f"points must be an (N, 2) array of (x, y), got shape {pts.shape}")
+    if off.ndim != 1 or k < 0 or off[0] != 0 or off[-1] != len(pts) or np.any(np.diff(off) < 0):
+        raise ValueError("offsets must rise from 0 to len(points)")
+    d_alpha = np.asarray(d_alpha, dtype=np.float64).reshape(k)
+    inside = np.asarray(centroid_inside, dtype=bool).reshape(k)
+    labels: list[str | None] = [None] * k
+    if k == 0:
+        return labels
+    counts = np.diff(off)
+    finite_pts = np.isfinite(pts).all(axis=1)
+    usable = np.isfinite(d_alpha) & (counts >= 3)
+    if not finite_pts.all():
+        bad = np.repeat(np.arange(k), counts)[~finite_pts]
+        usable[bad] = False
+    if not usable.any():
+        return labels
+    sel = np.repeat(usable, counts)
+    sub_off = np.concatenate(([0], np.cumsum(counts[usable])))
+    sub_pts = pts[sel]
+    desc = shape_descriptors_batch(sub_pts, sub_off)
+    idx = np.flatnonzero(usable)
+    label = np.full(len(idx), "", dtype=object)
+    valid = desc.valid
+    line = valid & (desc.elongation >= th.line_elongation)
+    label[line] = "line"
+    label[valid & ~line & ~inside[idx]] = "other"
+    todo = valid & ~line & inside[idx]
+    if todo.any():
+        sub_counts = np.diff(sub_off)
+        q, q_off = drop_repeated_points_batch(
+            sub_pts[np.repeat(todo, sub_counts)],
+            np.concatenate(([0], np.cumsum(sub_counts[todo]))),
+        )
+        if centroids is None:
+            area, centres = polygon_area_centroid_batch(q, q_off)
+            has_centre = area != 0.0  # _polar_series: "points enclose no area"
+        else:
+            centres = np.asarray(centroids, dtype=np.float64).reshape(k, 2)[idx[todo]]
+            has_centre = np.isfinite(centres).all(axis=1)
+            centres = np.where(has_centre[:, None], centres, 0.0)
+        r, rho, star, winding = _polar_series_batch(q, q_off, centres, 3, 8)
+        mean_r = 0.5 * r[:, 0].real
+        rho_mean = 0.5 * rho[:, 0].real
+        with np.errstate(divide="ignore", invalid="ignore"):
+            h3 = np.abs(r[:, 3]) / mean_r
+            kappa = np.minimum(np.abs(rho[:, 2]) / rho_mean, 1.0)
+            rest = np.abs(np.concatenate((rho[:, 1:2], rho[:, 3:]), axis=1)) / rho_mean[:, None]
+            deviation = np.sqrt(np.sum(rest**2, axis=1))
+            axis_ratio = np.sqrt((1.0 - kappa) / (1.0 + kappa))
+        rect = desc.rectangularity[todo]
+        allowance = th.raster_allowance_px / np.maximum(desc.semi_minor[todo], 1e-9)
+        ellipse_like = deviation <= th.ellipse_max_deviation + allowance
+        conditions = [
+            ~has_centre | (winding == 0) | (star < th.min_star_shapedness),
+            rect >= th.rectangle_min_rectangularity,
+            ellipse_like & (axis_ratio >= th.circle_min_axis_ratio),
+            ellipse_like,
+            (h3 >= th.triangle_min_h3) & (rect <= th.triangle_max_rectangularity),
+            (d_alpha[idx[todo]] < des_threshold_deg)
+            & (deviation <= th.des_max_deviation + allowance),
+        ]
+        choices = ["other", "rectangle", "circle", "ellipse", "triangle", "des"]
+        label[todo] = np.select(conditions, choices, default="other")
+    for j, name in zip(idx[valid].tolist(), label[valid].tolist(), strict=True):
+        labels[j] = name
+    return labels
+
+
+def _polar_series_batch(
+    q: np.ndarray, q_off: np.ndarray, centres: np.ndarray, n_r: int, n_rho: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_polar_series` of K polygons at once, for ``r`` and ``r^-2`` together.
+
+    ``q`` holds the polygons without repeated points (``drop_repeated_points_batch``), polygon
+    k runs around ``centres[k]``. Every edge contributes its exact integral (module
+    docstring), summed per polygon with ``np.add.reduceat``; edges on a line through the
+    centre contribute nothing. Returns the (K, n_r + 1) coefficients of ``r``, the
+    (K, n_rho + 1) coefficients of ``r^-2`` (both 0 where the winding number is 0), the
+    star-shapedness and the winding number of every polygon.
+    """
+    counts = np.diff(q_off)
+    k = len(counts)
+    starts = q_off[:-1]
+    owner = np.repeat(np.arange(k), counts)
+    nxt = np.arange(1, len(q) + 1)
+    nxt[q_off[1:] - 1] = starts  # the last vertex joins the first
+    x0, y0 = q[:, 0] - centres[owner, 0], q[:, 1] - centres[owner, 1]
+    x1, y1 = x0[nxt], y0[nxt]
+    length = np.hypot(x1 - x0, y1 - y0)
+    nx, ny = (y1 - y0) / length, (x0 - x1) / length
+    d = x0 * nx + y0 * ny
+    flip = np.where(d < 0, -1.0, 1.0)  # make (nx, ny) point from the centre to the edge
+    nx, ny, d = nx * flip, ny * flip, d * flip
+    scale = np.sqrt(np.maximum.reduceat(x0 * x0 + y0 * y0, starts))
+    ok = d > 1e-12 * scale[owner]  # edges on a line through the centre add nothing
+    d = np.where(ok, d, 1.0)
+    t0 = np.where(ok, (y0 * nx - x0 * ny) / d, 0.0)  # tan(u) at both ends
+    t1 = np.where(ok, (y1 * nx - x1 * ny) / d, 0.0)
+    sec0, sec1 = np.sqrt(1.0 + t0 * t0), np.sqrt(1.0 + t1 * t1)
+    z0, z1 = np.empty(len(q), complex), np.empty(len(q), complex)  # e^{iu}
+    z0.real, z0.imag = 1.0 / sec0, t0 / sec0
+    z1.real, z1.imag = 1.0 / sec1, t1 / sec1
+    du = np.arctan(t1) - np.arctan(t0)
+
+    net_turn = np.add.reduceat(du, starts)
+    winding = np.rint(net_turn / (2.0 * math.pi))
+    total_turn = np.add.reduceat(np.abs(du), starts)
+    star = np.abs(net_turn) / np.where(total_turn > 0, total_turn, 1.0)
+
+    # G[m] = int_{u0}^{u1} e^{imu} du, m = 0 .. max(n_r - 1, n_rho + 2)
+    g = [du.astype(complex)]
+    w0, w1 = z0.copy(), z1.copy()
+    for m in range(1, max(n_r - 1, n_rho + 2) + 1):
+        if m > 1:
+            w0 *= z0
+            w1 *= z1
+        g.append((w1 - w0) * (-1j / m))
+    e_phi = np.empty(len(q), complex)
+    e_phi.real, e_phi.imag = nx, ny
+    phases = [np.ones(len(q), complex)]  # e^{in phi}
+    for _ in range(max(n_r, n_rho)):
+        phases.append(phases[-1] * e_phi)
+
+    # r: int r e^{in theta} d theta = d e^{in phi} K_n, K_n = 2 G_{n-1} - K_{n-2}
+    r = np.empty((k, n_r + 1), complex)
+    k_prev = np.arcsinh(t1) - np.arcsinh(t0) + 0j
+    k_cur = du + 0.5j * (np.log1p(t1 * t1) - np.log1p(t0 * t0))
+    for n in range(n_r + 1):
+        if n >= 2:
+            k_prev, k_cur = k_cur, 2.0 * g[n - 1] - k_prev
+        kn = k_prev if n == 0 else k_cur
+        r[:, n] = np.add.reduceat(d * phases[n] * kn, starts)
+    # r^-2: e^{in phi} / d^2 (G_n / 2 + (G_{n+2} + G_{n-2}) / 4)
+    rho = np.empty((k, n_rho + 1), complex)
+    inv_d2 = np.where(ok, 1.0 / (d * d), 0.0)
+    for n in range(n_rho + 1):
+        g_minus = g[n - 2] if n >= 2 else np.conj(g[2 - n])
+        term = phases[n] * (0.5 * g[n] + 0.25 * (g[n + 2] + g_minus))
+        rho[:, n] = np.add.reduceat(inv_d2 * term, starts)
+
+    norm = np.where(winding != 0, math.pi * winding, np.inf)[:, None]
+    r /= norm
+    rho /= norm
+    r[:, 0] = r[:, 0].real
+    rho[:, 0] = rho[:, 0].real
+    return r, rho, star, winding
