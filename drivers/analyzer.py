@@ -310,6 +310,6 @@ def exchange_logger(sink: Callable[[str], None], name: str = "analyzer") -> Exch
     """An ``on_exchange`` callback writing lines like ``analyzer > read input 0 unit 1``."""
 
     def log(direction: str, text: str) -> None:
-        sink(f"{name} {'>' if direction == 'send' else '<'} {text}")
+        sink(f"{name} {'>' if direction == 'tx' else '<'} {text}")
 
     return log
