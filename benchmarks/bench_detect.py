@@ -13,12 +13,20 @@ repeats) and score, in the same run:
 
 Ellipse detections: for ``detect`` the DES whose shape label is circle/ellipse (rows without labels:
 every DES); a detection matches a true ellipse when its centre is within 2 px and, when the row
-gives axes, both semi-axes are within 10 % (+0.5 px). Run: ``python benchmarks/bench_detect.py``.
+gives axes, both semi-axes are within 10 % (+0.5 px). For matched ellipses the mean centre error
+and the mean semi-axis error (px) are shown too.
+
+A second table splits the default ``detect`` (labels + fit) into its stages (median ms per image):
+colour gradient (eq. 2), Canny hysteresis, edge thinning, boundary tracing, ordered chains,
+sub-pixel refinement, shape angle D_alpha (eq. 3), shape labels (harmonics), ellipse fits, and
+the rest (validation, building the objects).
+Run: ``python benchmarks/bench_detect.py``.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from collections.abc import Callable
 
@@ -26,8 +34,12 @@ import cv2
 import numpy as np
 
 from labauto.synthetic.shapes import make_scene
+from labauto.vision import detector, edges
+from labauto.vision.contours import Contours, ends_adjacent
 from labauto.vision.detector import DetectorParams
 from labauto.vision.detector import detect as vision_detect
+from labauto.vision.gradient import as_uint8_image, color_gradient
+from labauto.vision.shape_angle import shape_angles
 
 Detection = tuple[float, float, float | None, float | None]  # cx, cy, a, b
 
@@ -90,11 +102,13 @@ def edge_drawing() -> Callable | None:
     return run
 
 
-def score(found: list[Detection], truth: list[dict]) -> tuple[int, int, int]:
-    """(true positives, detections, true ellipses) with one-to-one greedy matching."""
+def score(found: list[Detection], truth: list[dict]) -> tuple[int, int, int, list, list]:
+    """(true positives, detections, true ellipses, centre errors, semi-axis errors) with
+    one-to-one greedy matching."""
     ellipses = [t["ellipse"] for t in truth if t["kind"] == "ellipse"]
     used = set()
     tp = 0
+    centre_err, axis_err = [], []
     for e in ellipses:
         (tx, ty), (ta, tb) = e["center"], e["axes"]
         best, best_d = None, 2.0
@@ -110,7 +124,66 @@ def score(found: list[Detection], truth: list[dict]) -> tuple[int, int, int]:
         if best is not None:
             used.add(best)
             tp += 1
-    return tp, len(found), len(ellipses)
+            centre_err.append(best_d)
+            _, _, a, b = found[best]
+            if a is not None:
+                axis_err += [abs(a - ta), abs(b - tb)]
+    return tp, len(found), len(ellipses), centre_err, axis_err
+
+
+STAGES = (
+    "gradient (eq. 2)",
+    "canny hysteresis",
+    "thin edges",
+    "trace (findContours)",
+    "ordered chains",
+    "sub-pixel",
+    "shape angle (eq. 3)",
+    "shape labels",
+    "ellipse fits",
+    "rest",
+)
+
+
+def stage_times(image: np.ndarray, params: DetectorParams) -> list[float]:
+    """Seconds per stage of ``detect(image, params)`` (Canny method), same calls in order."""
+    t = [time.perf_counter()]
+    img = as_uint8_image(image)
+    gx, gy = color_gradient(img, params.blur_sigma)
+    t.append(time.perf_counter())
+    edge_map = edges.canny_edges(gx, gy, params.canny_low, params.canny_high)
+    t.append(time.perf_counter())
+    thin = edges.thin_edges(edge_map)
+    t.append(time.perf_counter())
+    traces, hierarchy = cv2.findContours(
+        thin, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE, offset=(-1, -1)
+    )
+    t.append(time.perf_counter())
+    outer = hierarchy[0, :, 3] < 0
+    keep = [
+        c for c, o in zip(traces, outer, strict=True) if o and len(c) >= params.min_contour_length
+    ]
+    pix, offsets = edges.traces_to_chains(
+        keep, img.shape[1], params.min_contour_length, params.max_contour_length
+    )
+    t.append(time.perf_counter())
+    grads = edges.gradient_at(gx, gy, pix)
+    points = edges.refine_subpixel(pix, gx, gy)
+    contours = Contours(points, offsets, grads, ends_adjacent(pix, offsets))
+    t.append(time.perf_counter())
+    angles = shape_angles(contours.points, contours.gradients, contours.offsets, contours.closed)
+    des = angles.is_des(params.des_threshold_deg, params.statistic, params.max_gap_fraction)
+    t.append(time.perf_counter())
+    d_alpha = angles.statistic(params.statistic)
+    detector._labels(contours, d_alpha, angles.centroid_inside, angles.centroid, params)
+    t.append(time.perf_counter())
+    detector._fits(contours, des, params)
+    t.append(time.perf_counter())
+    total = time.perf_counter()
+    vision_detect(image, params)
+    whole = time.perf_counter() - total
+    stages = list(np.diff(t))
+    return [*stages, max(whole - sum(stages), 0.0)]
 
 
 def main() -> None:
@@ -146,18 +219,20 @@ def main() -> None:
     ]
     print(
         f"{args.seeds} scenes 1280x1024 BGR, noise sigma {args.noise}, cv2.setNumThreads("
-        f"{args.threads}), {args.repeats} repeats, cv2 {cv2.__version__}"
+        f"{args.threads}) (cv2.getNumThreads() = {cv2.getNumThreads()}, "
+        f"{os.cpu_count()} CPUs), {args.repeats} repeats, cv2 {cv2.__version__}, "
+        f"numpy {np.__version__}"
     )
     if ed is None:
         print(
             "cv2.ximgproc not installed: EdgeDrawing row skipped (opencv-contrib-python-headless)"
         )
-    columns = ("ms/image", "min ms", "found", "prec", "recall")
+    columns = ("ms/image", "min ms", "found", "prec", "recall", "ctr err", "axis err")
     header = f"{'pipeline':48s} " + " ".join(f"{c:>9s}" for c in columns)
     print(header)
     print("-" * len(header))
     for label, fn in rows:
-        times, tp, n_found, n_true = [], 0, 0, 0
+        times, tp, n_found, n_true, centre_err, axis_err = [], 0, 0, 0, [], []
         for image, truth in scenes:
             fn(image)  # warm-up
             per = []
@@ -166,14 +241,29 @@ def main() -> None:
                 found = fn(image)
                 per.append(time.perf_counter() - t0)
             times.append(np.median(per))
-            a, b, c = score(found, truth)
+            a, b, c, errs, axes = score(found, truth)
             tp, n_found, n_true = tp + a, n_found + b, n_true + c
+            centre_err += errs
+            axis_err += axes
         precision = tp / n_found if n_found else float("nan")
         recall = tp / n_true if n_true else float("nan")
+        ctr = np.mean(centre_err) if centre_err else float("nan")
+        axis = np.mean(axis_err) if axis_err else float("nan")
         print(
             f"{label:48s} {1e3 * np.median(times):9.2f} {1e3 * np.min(times):9.2f} "
-            f"{n_found / len(scenes):9.1f} {precision:9.3f} {recall:9.3f}"
+            f"{n_found / len(scenes):9.1f} {precision:9.3f} {recall:9.3f} {ctr:9.4f} {axis:9.4f}"
         )
+
+    print(f"\nstages of {name} + labels + ellipse fit (median ms per image over the scenes)")
+    params = DetectorParams()
+    per_scene = []
+    for image, _ in scenes:
+        stage_times(image, params)  # warm-up
+        per_scene.append(np.median([stage_times(image, params) for _ in range(args.repeats)], 0))
+    stage_ms = 1e3 * np.median(per_scene, axis=0)
+    for stage, ms in zip(STAGES, stage_ms, strict=True):
+        print(f"  {stage:28s} {ms:7.2f}")
+    print(f"  {'sum':28s} {stage_ms.sum():7.2f}")
 
 
 if __name__ == "__main__":

@@ -470,8 +470,15 @@ def drop_repeated_points_batch(
     pts = np.asarray(points, dtype=np.float64)
     off = np.asarray(offsets, dtype=np.int64)
     keep = np.ones(len(pts), dtype=bool)
-    keep[1:] = np.any(pts[1:] != pts[:-1], axis=1)
+    x, y = pts[:, 0], pts[:, 1]
+    np.not_equal(x[1:], x[:-1], out=keep[1:])
+    keep[1:] |= y[1:] != y[:-1]
     keep[off[:-1]] = True  # a contour's first point has no predecessor
+    if keep.all():
+        counts = np.diff(off)
+        wrap = (counts > 1) & (x[off[:-1]] == x[off[1:] - 1]) & (y[off[:-1]] == y[off[1:] - 1])
+        if not wrap.any():
+            return pts, off
     counts = np.add.reduceat(keep.astype(np.int64), off[:-1]) if len(pts) else off[1:] * 0
     pts = pts[keep]
     off = np.concatenate(([0], np.cumsum(counts)))
@@ -484,7 +491,9 @@ def drop_repeated_points_batch(
     return pts, off
 
 
-def shape_descriptors_batch(points: np.ndarray, offsets: np.ndarray) -> DescriptorArrays:
+def shape_descriptors_batch(
+    points: np.ndarray, offsets: np.ndarray, *, min_points: int = 3
+) -> DescriptorArrays:
     """The label descriptors of :func:`shape_descriptors` for K contours at once.
 
     Area, centroid and second moments are per-contour sums over the edges
@@ -498,6 +507,9 @@ def shape_descriptors_batch(points: np.ndarray, offsets: np.ndarray) -> Descript
         (N, 2) finite float points of all contours, in order.
     offsets : np.ndarray
         (K + 1,) int; contour k is ``points[offsets[k]:offsets[k + 1]]``.
+    min_points : int
+        Contours with fewer points are not valid: 3 as :func:`shape_descriptors`; 2 for
+        contours already checked and passed through :func:`drop_repeated_points_batch`.
 
     Returns
     -------
@@ -505,22 +517,33 @@ def shape_descriptors_batch(points: np.ndarray, offsets: np.ndarray) -> Descript
     """
     pts = np.asarray(points, dtype=np.float64)
     off = np.asarray(offsets, dtype=np.int64)
-    k = len(off) - 1
+    counts = np.diff(off)
+    use = counts >= min_points
+    out = _empty_descriptors(len(counts))
+    if not use.any():
+        return out
+    if not use.all():
+        pts = pts[np.repeat(use, counts)]
+        off = np.concatenate(([0], np.cumsum(counts[use])))
+    _fill_descriptors(out, np.flatnonzero(use), *drop_repeated_points_batch(pts, off))
+    return out
+
+
+def _empty_descriptors(k: int) -> DescriptorArrays:
     nan = np.full(k, np.nan)
-    out = DescriptorArrays(
+    return DescriptorArrays(
         np.zeros(k, bool), nan.copy(), np.full((k, 2), np.nan), nan.copy(), nan.copy(),
         nan.copy(), nan.copy(),
     )  # fmt: skip
-    use = np.diff(off) >= 3
-    if not use.any():
-        return out
-    sub = np.repeat(use, np.diff(off))
-    q, q_off = drop_repeated_points_batch(
-        pts[sub], np.concatenate(([0], np.cumsum(np.diff(off)[use])))
-    )
+
+
+def _fill_descriptors(
+    out: DescriptorArrays, idx: np.ndarray, q: np.ndarray, q_off: np.ndarray
+) -> None:
+    """Write the descriptors of the deduplicated contours ``q`` into rows ``idx`` of ``out``."""
     counts = np.diff(q_off)
     distinct = counts >= 2
-    idx = np.flatnonzero(use)[distinct]
+    idx = idx[distinct]
     if not distinct.all():
         sub = np.repeat(distinct, counts)
         q, counts = q[sub], counts[distinct]
@@ -539,9 +562,12 @@ def shape_descriptors_batch(points: np.ndarray, offsets: np.ndarray) -> Descript
     has_area = 4.0 * math.pi * area > _NO_AREA_COMPACTNESS * length**2
     if not has_area.all():  # no area (a traced line): the curve centroid (_curve_centroid)
         mid_x, mid_y = 0.5 * (q[:, 0] + q[nxt, 0]), 0.5 * (q[:, 1] + q[nxt, 1])
-        curve = np.column_stack(
-            (np.add.reduceat(mid_x * seg_len, starts), np.add.reduceat(mid_y * seg_len, starts))
-        ) / np.where(length > 0, length, 1.0)[:, None]
+        curve = (
+            np.column_stack(
+                (np.add.reduceat(mid_x * seg_len, starts), np.add.reduceat(mid_y * seg_len, starts))
+            )
+            / np.where(length > 0, length, 1.0)[:, None]
+        )
         centroid = np.where(has_area[:, None], centroid, curve)
         area = np.where(has_area, area, 0.0)
 
@@ -585,7 +611,6 @@ def shape_descriptors_batch(points: np.ndarray, offsets: np.ndarray) -> Descript
     )
     out.area[idx] = area
     out.centroid[idx] = centroid
-    return out
 
 
 def polygon_area_centroid_batch(
@@ -624,9 +649,7 @@ def _polygon_area_centroids(
     """Areas, area centroids and vertex means of K polygons (``nxt``: index of the next vertex)."""
     starts = off[:-1]
     counts = np.diff(off)
-    mean = np.column_stack(
-        (np.add.reduceat(pts[:, 0], starts), np.add.reduceat(pts[:, 1], starts))
-    )
+    mean = np.column_stack((np.add.reduceat(pts[:, 0], starts), np.add.reduceat(pts[:, 1], starts)))
     mean /= counts[:, None]
     px, py = pts[:, 0] - mean[owner, 0], pts[:, 1] - mean[owner, 1]
     qx, qy = px[nxt], py[nxt]

@@ -7,7 +7,9 @@ Pipeline (sections 3.1-3.2 of the paper):
    segmentation (``method="color"``: eq. 1, boundary tracing in the 8-neighbourhood);
 2. the shape angle D_alpha (eq. 3) of every contour, its centroid and the centroid-inside test;
 3. a DES is a contour whose centroid is inside and whose D_alpha is below a threshold;
-4. a shape label for every object (harmonic analysis) and a geometric ellipse fit for every DES.
+4. a shape label for every object (harmonic analysis) and a geometric ellipse fit for every DES,
+   both vectorised over all contours of the image (``classify_shapes``,
+   ``fit_ellipses_geometric_batch``).
 
 Coordinates: pixels, origin at the centre of the top-left pixel, x right, y down.
 """
@@ -29,24 +31,25 @@ from labauto.vision.shape_angle import (
 )
 
 try:  # V2's modules (shape label, ellipse fit)
-    from labauto.vision.harmonics import classify_shape, classify_shapes
+    from labauto.vision.harmonics import classify_shapes
 except ImportError:  # pragma: no cover - TODO(V2): remove once harmonics.py is in place
-    classify_shape = classify_shapes = None
+    classify_shapes = None
 try:
-    from labauto.vision.ellipse_fit import fit_ellipse_geometric, fit_ellipses_geometric_batch
+    from labauto.vision.ellipse_fit import fit_ellipses_geometric_batch
 except ImportError:  # pragma: no cover - TODO(V2): remove once ellipse_fit.py is in place
-    fit_ellipse_geometric = fit_ellipses_geometric_batch = None
+    fit_ellipses_geometric_batch = None
 
 #: Shape label given when classification is disabled or impossible.
 UNKNOWN_SHAPE = "unknown"
 
 #: Levenberg-Marquardt cap of the geometric ellipse fit of every DES. From the algebraic seed
-#: an elliptic contour reaches the optimum within 1e-5 px in 2-3 Gauss-Newton steps; contours
-#: that are no ellipse (a DES square, a bean) creep on for dozens of iterations toward an
-#: ever longer ellipse, which the cap stops (their rms stays px-large either way).
-FIT_MAX_ITER = 8
-#: Relative tolerance of that fit: a step below ``FIT_TOL * a`` px ends it (1e-5 px for a = 10).
-FIT_TOL = 1e-6
+#: an elliptic contour reaches its optimum within 1e-5 px in 2-3 Gauss-Newton steps (on the
+#: benchmark scenes the fitted ellipses equal fully converged fits to 2e-6 px); a DES that is
+#: no ellipse (a square, a bean) creeps on for dozens of iterations toward an ever longer
+#: ellipse, which the cap stops (its rms stays pixels large either way).
+FIT_MAX_ITER = 5
+#: Relative tolerance of that fit: a step below ``FIT_TOL * a`` px ends it (1e-4 px at a = 10).
+FIT_TOL = 1e-5
 
 
 @dataclass(frozen=True)
@@ -251,7 +254,10 @@ def extract_contours(image: np.ndarray, params: DetectorParams = DetectorParams(
 
 
 def _labels(
-    contours: Contours, d_alpha: np.ndarray, inside: np.ndarray, centroids: np.ndarray,
+    contours: Contours,
+    d_alpha: np.ndarray,
+    inside: np.ndarray,
+    centroids: np.ndarray,
     params: DetectorParams,
 ) -> list[str]:
     """Shape label of every contour (step 4), all contours at once (:func:`classify_shapes`)."""
@@ -281,39 +287,6 @@ def _fits(contours: Contours, des: np.ndarray, params: DetectorParams) -> list[E
     for j, fit in zip(np.flatnonzero(des).tolist(), fits, strict=True):
         out[j] = None if fit is None else fit.ellipse
     return out
-
-
-def _label(
-    points: np.ndarray,
-    d_alpha: float,
-    inside: bool,
-    closed: bool,
-    centroid: tuple[float, float],
-    params: DetectorParams,
-) -> str:
-    if not params.classify or classify_shape is None:
-        return UNKNOWN_SHAPE
-    try:
-        return classify_shape(
-            points,
-            d_alpha=d_alpha,
-            centroid_inside=inside,
-            closed=closed,
-            des_threshold_deg=params.des_threshold_deg,
-            centroid=centroid,
-        )
-    except ValueError:  # degenerate contour (e.g. all points on a line)
-        return UNKNOWN_SHAPE
-
-
-def _fit(points: np.ndarray) -> Ellipse | None:
-    if fit_ellipse_geometric is None or points.shape[0] < 5:
-        return None
-    try:
-        fit = fit_ellipse_geometric(points)
-    except ValueError:  # degenerate point set
-        return None
-    return fit.ellipse
 
 
 def _objects(contours: Contours, params: DetectorParams) -> list[DetectedObject]:

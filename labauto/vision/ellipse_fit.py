@@ -349,7 +349,8 @@ def fit_ellipses_geometric_batch(
 
     Every iteration finds the contact points of all contours' points in one Newton loop and
     solves all 5x5 normal equations in one batched call, so 40 contours cost about as much
-    as 3-4 single fits. Each contour keeps its own damping and stops on its own.
+    as 3-4 single fits. Each contour keeps its own damping and stops on its own, and only the
+    points of contours still iterating are evaluated.
 
     Parameters
     ----------
@@ -450,15 +451,12 @@ def _levenberg_marquardt(
             w_starts = np.concatenate(([0], np.cumsum(w_counts)[:-1]))
             local = np.repeat(np.arange(len(ids)), w_counts)
         iterations[ids] += 1
-        # per-contour normal equations J^T J (upper triangle) and J^T d in one reduction
-        terms = np.empty((20, len(dist)))
-        np.multiply(jac[rows], jac[cols], out=terms[:15])
-        np.multiply(jac, dist, out=terms[15:])
-        sums = np.add.reduceat(terms, w_starts, axis=1).T
+        # per-contour normal equations: J^T J (upper triangle) and J^T d, row by row (small
+        # temporaries stay in cache)
         hess = np.empty((len(ids), 5, 5))
-        hess[:, rows, cols] = sums[:, :15]
-        hess[:, cols, rows] = sums[:, :15]
-        grad = sums[:, 15:]
+        for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
+            hess[:, r, c] = hess[:, c, r] = np.add.reduceat(jac[r] * jac[c], w_starts)
+        grad = np.add.reduceat(jac * dist, w_starts, axis=1).T
         diag = hess[:, diagonal, diagonal]
         w_lam = lam[ids]
         # a tiny ridge keeps the angle column solvable for a circle (where it is zero)
@@ -521,7 +519,7 @@ def _residuals(
     v = c * dy - s * dx
     fu, fv, roots = _contact(u, v, a, b, roots)
     nu, nv = fu / (a * a), fv / (b * b)  # outward normal (unnormalised) in the ellipse frame
-    norm = np.hypot(nu, nv)
+    norm = np.sqrt(nu * nu + nv * nv)  # (np.hypot is several times slower)
     nu /= norm
     nv /= norm
     dist = nu * (u - fu) + nv * (v - fv)
@@ -613,24 +611,25 @@ def _contact(
         guess = 0.5 * (x * qx + y * qy - 1.0) / (qx * qx + qy * qy)
     # One Newton step from the guess lands left of the root from either side (F is convex);
     # the safe start replaces it if better. From there Newton is monotone and cannot overshoot.
-    # Every point iterates until its own step is negligible; the ones still moving go on alone.
+    # Every point iterates until its own step is below 1e-9 (s + b^2): Newton converges
+    # quadratically there, so the error left is far below that. The points still moving go on
+    # alone (most stop after 2-4 steps).
     s = np.maximum(guess, safe)
     s = np.maximum(s + _newton_step(s, ax, by, a2, b2), safe)
     idx = None  # all points
-    cur = (s, ax, by, a2, b2)
+    cur = [s, ax, by, a2, b2]
     for _ in range(_MAX_NEWTON):
-        s_cur, ax_cur, by_cur, a2_cur, b2_cur = cur
-        step = _newton_step(s_cur, ax_cur, by_cur, a2_cur, b2_cur)
-        s_cur = s_cur + step
-        if idx is None:
-            s = s_cur
-        else:
-            s[idx] = s_cur
-        busy = np.abs(step) > 1e-12 * (np.abs(s_cur) + b2_cur)
-        if not busy.any():
+        step = _newton_step(*cur)
+        cur[0] = cur[0] + step
+        busy = np.abs(step) > 1e-9 * (np.abs(cur[0]) + cur[4])
+        n_busy = int(np.count_nonzero(busy))
+        if n_busy == 0:
             break
-        idx = np.flatnonzero(busy) if idx is None else idx[busy]
-        cur = (s_cur[busy], ax_cur[busy], by_cur[busy], a2_cur[busy], b2_cur[busy])
+        if n_busy <= len(busy) // 2:  # carry on with the busy points alone
+            s = _scatter(s, idx, cur[0])
+            idx = np.flatnonzero(busy) if idx is None else idx[busy]
+            cur = [v[busy] for v in cur]
+    s = _scatter(s, idx, cur[0])
     cu = a2 * x / (s + a2)
     cv = b2 * y / (s + b2)
     if any_inner:
@@ -642,6 +641,14 @@ def _contact(
         s[inner] = -bi * bi
     cu, cv = np.where(swap, cv, cu), np.where(swap, cu, cv)
     return np.copysign(cu, u), np.copysign(cv, v), s
+
+
+def _scatter(s: np.ndarray, idx: np.ndarray | None, values: np.ndarray) -> np.ndarray:
+    """``s`` with ``values`` written at ``idx`` (``values`` itself when ``idx`` is None: all)."""
+    if idx is None:
+        return values
+    s[idx] = values
+    return s
 
 
 def _newton_step(

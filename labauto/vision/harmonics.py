@@ -362,8 +362,9 @@ def _polar_series(
 
     x0, y0 = pts[:, 0] - c[0], pts[:, 1] - c[1]
     x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
-    length = np.hypot(x1 - x0, y1 - y0)
-    nx, ny = (y1 - y0) / length, (x0 - x1) / length
+    ex, ey = x1 - x0, y1 - y0
+    length = np.sqrt(ex * ex + ey * ey)  # (np.hypot is several times slower)
+    nx, ny = ey / length, -ex / length
     d = x0 * nx + y0 * ny
     flip = np.where(d < 0, -1.0, 1.0)  # make (nx, ny) point from the centroid to the edge
     nx, ny, d = nx * flip, ny * flip, d * flip
@@ -435,7 +436,7 @@ def classify_shapes(
 ) -> list[str | None]:
     """:func:`classify_shape` for K contours at once, vectorised over all their points.
 
-    The same decision rule on the same features: the descriptors come from
+    The same decision rule on the same features: the descriptors are those of
     :func:`~labauto.vision.descriptors.shape_descriptors_batch` (one ``cv2.minAreaRect`` per
     contour, everything else per-contour sums), the polar series of ``r`` (harmonics 0-3, all
     the rule reads) and ``r^-2`` (0-8) from one pass over all edges of all contours. Results
@@ -487,11 +488,12 @@ def classify_shapes(
         usable[bad] = False
     if not usable.any():
         return labels
-    sel = np.repeat(usable, counts)
-    sub_off = np.concatenate(([0], np.cumsum(counts[usable])))
-    sub_pts = pts[sel]
-    desc = shape_descriptors_batch(sub_pts, sub_off)
     idx = np.flatnonzero(usable)
+    if not usable.all():
+        pts = pts[np.repeat(usable, counts)]
+        off = np.concatenate(([0], np.cumsum(counts[usable])))
+    q, q_off = drop_repeated_points_batch(pts, off)
+    desc = shape_descriptors_batch(q, q_off, min_points=2)
     label = np.full(len(idx), "", dtype=object)
     valid = desc.valid
     line = valid & (desc.elongation >= th.line_elongation)
@@ -499,11 +501,10 @@ def classify_shapes(
     label[valid & ~line & ~inside[idx]] = "other"
     todo = valid & ~line & inside[idx]
     if todo.any():
-        sub_counts = np.diff(sub_off)
-        q, q_off = drop_repeated_points_batch(
-            sub_pts[np.repeat(todo, sub_counts)],
-            np.concatenate(([0], np.cumsum(sub_counts[todo]))),
-        )
+        if not todo.all():
+            q_counts = np.diff(q_off)
+            q = q[np.repeat(todo, q_counts)]
+            q_off = np.concatenate(([0], np.cumsum(q_counts[todo])))
         if centroids is None:
             area, centres = polygon_area_centroid_batch(q, q_off)
             has_centre = area != 0.0  # _polar_series: "points enclose no area"
@@ -559,8 +560,9 @@ def _polar_series_batch(
     nxt[q_off[1:] - 1] = starts  # the last vertex joins the first
     x0, y0 = q[:, 0] - centres[owner, 0], q[:, 1] - centres[owner, 1]
     x1, y1 = x0[nxt], y0[nxt]
-    length = np.hypot(x1 - x0, y1 - y0)
-    nx, ny = (y1 - y0) / length, (x0 - x1) / length
+    ex, ey = x1 - x0, y1 - y0
+    length = np.sqrt(ex * ex + ey * ey)  # (np.hypot is several times slower)
+    nx, ny = ey / length, -ex / length
     d = x0 * nx + y0 * ny
     flip = np.where(d < 0, -1.0, 1.0)  # make (nx, ny) point from the centre to the edge
     nx, ny, d = nx * flip, ny * flip, d * flip
@@ -573,7 +575,9 @@ def _polar_series_batch(
     z0, z1 = np.empty(len(q), complex), np.empty(len(q), complex)  # e^{iu}
     z0.real, z0.imag = 1.0 / sec0, t0 / sec0
     z1.real, z1.imag = 1.0 / sec1, t1 / sec1
-    du = np.arctan(t1) - np.arctan(t0)
+    # u1 - u0 in one arctan2: tan(u1) - tan(u0) and 1 + tan(u0) tan(u1) are sin(u1 - u0) and
+    # cos(u1 - u0) divided by cos(u0) cos(u1) > 0
+    du = np.arctan2(t1 - t0, 1.0 + t0 * t1)
 
     net_turn = np.add.reduceat(du, starts)
     winding = np.rint(net_turn / (2.0 * math.pi))
@@ -596,8 +600,13 @@ def _polar_series_batch(
 
     # r: int r e^{in theta} d theta = d e^{in phi} K_n, K_n = 2 G_{n-1} - K_{n-2}
     r = np.empty((k, n_r + 1), complex)
-    k_prev = np.arcsinh(t1) - np.arcsinh(t0) + 0j
-    k_cur = du + 0.5j * (np.log1p(t1 * t1) - np.log1p(t0 * t0))
+    # K_0 = asinh(t1) - asinh(t0) = log((t1 + sec1) / (t0 + sec0)), t + sec = 1 / (sec - t)
+    # without cancellation for t < 0; K_1 = du - i log(cos u) |_0^1 = du + i log(sec1 / sec0)
+    e0 = np.where(t0 >= 0, t0 + sec0, 1.0 / (sec0 - t0))
+    e1 = np.where(t1 >= 0, t1 + sec1, 1.0 / (sec1 - t1))
+    k_prev = np.log(e1 / e0) + 0j
+    k_cur = np.empty(len(q), complex)
+    k_cur.real, k_cur.imag = du, np.log(sec1 / sec0)
     for n in range(n_r + 1):
         if n >= 2:
             k_prev, k_cur = k_cur, 2.0 * g[n - 1] - k_prev
