@@ -45,7 +45,11 @@ def build_workcell(config: Config, plugins: Plugins) -> Workcell:
     registry = plugins.registry
     camera = registry.driver("camera", config.camera.driver)(config.camera)
     robot = registry.driver("robot", config.robot.driver)(config.robot)
-    analyzer = registry.driver("analyzer", config.analyzer.driver)(config.analyzer)
+    try:
+        analyzer = registry.driver("analyzer", config.analyzer.driver)(config.analyzer)
+    except BaseException:
+        robot.close()  # e.g. stop the simulator it started
+        raise
     return Workcell(robot, analyzer, camera, closers=[robot.close, analyzer.close])
 
 
@@ -80,10 +84,14 @@ def open_run(
         If ``resume_id`` names a finished run.
     """
     plugins = plugins or load_plugins(config.plugins.enabled, config.plugins.disabled)
-    run_id, resumed = _choose_run(store, config, resume_id, force_new)
+    workcell = build_workcell(config, plugins)
+    try:
+        run_id, resumed = _choose_run(store, config, resume_id, force_new)
+    except BaseException:
+        workcell.close()
+        raise
     for failure in plugins.failed:
         store.record_event(run_id, "plugin.failed", f"{failure.name}: {failure.error}")
-    workcell = build_workcell(config, plugins)
     control = RunControl(on_estop=lambda: workcell.robot.soft_reset())
     runner = ColonyPickingRun(run_id, config, store, plugins, workcell, control, reporter)
     control.on_change = lambda command: runner.event(f"run.{command}", f"operator: {command}")

@@ -216,3 +216,16 @@ def test_event_hooks_reach_an_installed_exporter(make_config):
     assert names == ["detections_stored", "pick_finished", "pick_finished", "run_finished"]
     finished = sample.EVENTS[-1][1]
     assert finished["state"] == "succeeded" and finished["summary"]["picks"] == {"analyzed": 2}
+
+
+def test_unknown_driver_is_a_clear_error_and_leaves_no_run(make_config):
+    from labauto.errors import PluginError
+
+    config = make_config(analyzer={"driver": "nonexistent"})
+    store = Store.open(config.database.url)
+    with (
+        pytest.raises(PluginError, match="no analyzer driver named 'nonexistent'"),
+        open_run(config, store),
+    ):
+        pass
+    assert store.list_runs() == []
