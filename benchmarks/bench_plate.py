@@ -17,7 +17,10 @@ percentile over all plates x repeats) and score, in the same run:
 
 Scores: a reported colony matches the truth colony whose outline holds its centroid
 (``score_plate``); "correct" is matched with the right class; FP are reported colonies matching
-none. Run: ``python benchmarks/bench_plate.py [--plates N] [--repeats R]``.
+none. A second table splits ``analyze_plate``'s time into its stages (``PlateResult.stage_ms``:
+dish, objects, measures, classes). Run:
+``python benchmarks/bench_plate.py [--plates N] [--repeats R] [--threads T]`` (``--threads``
+sets ``cv2.setNumThreads``; OpenCV's default otherwise).
 """
 
 from __future__ import annotations
@@ -108,25 +111,40 @@ def main() -> None:
     ap.add_argument("--plates", type=int, default=6)
     ap.add_argument("--repeats", type=int, default=15)
     ap.add_argument("--seed", type=int, default=1000)
+    ap.add_argument("--threads", type=int, default=None, help="cv2.setNumThreads")
     args = ap.parse_args()
+    if args.threads is not None:
+        cv2.setNumThreads(args.threads)
 
     plates: list[tuple[np.ndarray, PlateTruth]] = [
         generate_plate(args.seed + i, agar=AGARS[i % len(AGARS)]) for i in range(args.plates)
     ]
 
-    def ours(params: PlateParams | None = None) -> Callable[[np.ndarray, PlateTruth], list]:
-        return lambda img, truth: analyze_plate(img, params).colonies
+    stages: dict[str, list[dict[str, float]]] = {}  # per method: stage_ms of every run
+
+    def timed(name: str, img: np.ndarray, params: PlateParams | None) -> list:
+        result = analyze_plate(img, params)
+        stages.setdefault(name, []).append(result.stage_ms)
+        return result.colonies
+
+    def ours(
+        name: str, params: PlateParams | None = None
+    ) -> Callable[[np.ndarray, PlateTruth], list]:
+        return lambda img, truth: timed(name, img, params)
 
     def ours_region(img: np.ndarray, truth: PlateTruth) -> list:
         (cx, cy), r = truth.dish.center, truth.dish.radius
-        return analyze_plate(img, PlateParams(region=(cx, cy, r))).colonies
+        return timed("analyze_plate (region)", img, PlateParams(region=(cx, cy, r)))
 
     methods: list[tuple[str, Callable, int]] = [
-        ("analyze_plate", ours(), args.repeats),
+        ("analyze_plate", ours("analyze_plate"), args.repeats),
         ("analyze_plate (region)", ours_region, args.repeats),
         (
             "analyze_plate (V1 detector)",
-            ours(PlateParams(method="detector", detector=DetectorParams(method="color"))),
+            ours(
+                "analyze_plate (V1 detector)",
+                PlateParams(method="detector", detector=DetectorParams(method="color")),
+            ),
             max(args.repeats // 5, 1),
         ),
         ("OpenCV baseline", lambda img, truth: baseline(img), args.repeats),
@@ -160,6 +178,14 @@ def main() -> None:
             f"{count_ok:5d}/{merged:<6d}"
         )
     print("paper (Pentium IV 2 GHz, 1.3 Mpixel colour): 230 ms, ~98 % detection/classification")
+    print()
+    names = list(next(iter(stages.values()))[0])
+    header = f"{'stage medians, ms':30s} " + " ".join(f"{n:>9s}" for n in names)
+    print(header)
+    print("-" * len(header))
+    for name, runs in stages.items():
+        cells = " ".join(f"{np.median([r[n] for r in runs]):9.2f}" for n in names)
+        print(f"{name:30s} {cells}")
 
 
 if __name__ == "__main__":

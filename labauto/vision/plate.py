@@ -57,6 +57,7 @@ Coordinates: pixels, origin at the centre of the top-left pixel, x right, y down
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -83,6 +84,7 @@ Circle = tuple[float, float, float]
 Polygon = tuple[tuple[float, float], ...]
 
 _SQUARES = (np.arange(256, dtype=np.float32) ** 2).reshape(1, 256)
+_ONES_3 = np.ones((1, 3), np.float32)  # cv2.transform: sum of the three channels
 _SOBEL5_SMOOTH = np.array([1.0, 4.0, 6.0, 4.0, 1.0], np.float32)
 _SOBEL5_DERIV = np.array([-1.0, -2.0, 0.0, 2.0, 1.0], np.float32)
 _SOBEL5_X = np.outer(_SOBEL5_SMOOTH, _SOBEL5_DERIV).ravel()  # rows: dy, cols: dx
@@ -297,7 +299,10 @@ class Colony:
 class PlateResult:
     """Everything :func:`analyze_plate` found on one plate.
 
-    ``rejected`` counts the objects dropped per reason (dust, large, thin, elongated, rim); it is
+    ``rejected`` counts the objects dropped per reason (dust, large, thin, elongated, stroke,
+    rim); ``stage_ms`` is the time taken per stage of :func:`analyze_plate` (``dish``: dish and
+    usable area; ``objects``: segmentation, contours and D_alpha; ``measures``: artefact tests
+    and waists; ``classes``: mixed-colony test, merged counts and the result). Both are
     diagnostic and not part of the JSON.
     """
 
@@ -307,6 +312,7 @@ class PlateResult:
     dish: Dish
     colonies: list[Colony]
     rejected: dict[str, int] = field(default_factory=dict)
+    stage_ms: dict[str, float] = field(default_factory=dict)
 
     @property
     def counts(self) -> dict[str, int]:
@@ -456,12 +462,25 @@ def _refine_dish(
 
 
 def _fit_circle(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
-    """Algebraic (Kasa) least-squares circle through points."""
-    a = np.column_stack((x, y, np.ones_like(x)))
-    b = x * x + y * y
-    (p, q, s), *_ = np.linalg.lstsq(a, b, rcond=None)
+    """Algebraic (Kasa) least-squares circle through points.
+
+    Minimises the sum of ``(u^2 + v^2 - p u - q v - s)^2`` over the points' offsets ``(u, v)``
+    from their mean (centred, so the normal equations are well conditioned): with the mean
+    removed, ``s`` separates from ``(p, q)``, a 2x2 system solved in closed form.
+    """
+    mx, my = float(x.mean()), float(y.mean())
+    u, v = x - mx, y - my
+    rho = u * u + v * v
+    suu, svv, suv = float(u @ u), float(v @ v), float(u @ v)
+    sur, svr = float(u @ rho), float(v @ rho)
+    det = suu * svv - suv * suv
+    if not det > 0:  # all points on a line: no circle, keep their centre
+        return mx, my, float(math.sqrt(rho.mean()))
+    p = (sur * svv - svr * suv) / det
+    q = (svr * suu - sur * suv) / det
+    s = float(rho.mean())  # the mean of u and v is 0
     cx, cy = p / 2, q / 2
-    return float(cx), float(cy), float(math.sqrt(max(s + cx * cx + cy * cy, 0.0)))
+    return mx + cx, my + cy, float(math.sqrt(max(s + cx * cx + cy * cy, 0.0)))
 
 
 def _usable_area(
@@ -518,33 +537,47 @@ def _usable_area(
 
 
 def _deviation(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> np.ndarray:
-    """Summed squared colour deviation from the local background (float32, ROI-sized)."""
+    """Summed squared colour deviation from the local background (float32, ROI-sized).
+
+    The background is estimated on the ROI subsampled by ``background_scale`` (a few thousand
+    pixels: cheap whatever the image size); only a few full-size passes follow, all in OpenCV
+    (resize of the background, absolute difference, squares summed over the channels).
+    """
     h, w = usable.shape
     s = int(params.background_scale)
     small = np.ascontiguousarray(roi[::s, ::s])
-    valid = usable[::s, ::s] == 255
+    valid = usable[::s, ::s]
     med = cv2.medianBlur(small, 5)
-    diff = small.astype(np.float32) - med
-    outlier = (diff * diff).sum(axis=2) > params.color_threshold * 0.5
-    outlier = cv2.dilate(outlier.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    weight = (valid & ~outlier).astype(np.float32)
-    if weight.sum() < 4:
-        weight = valid.astype(np.float32)
-    if weight.sum() < 1:
-        weight = np.ones_like(weight)
-    num = cv2.GaussianBlur(small.astype(np.float32) * weight[..., None], (0, 0), 2.0)
+    off_median = cv2.transform(cv2.LUT(cv2.absdiff(small, med), _SQUARES), _ONES_3)
+    outlier = cv2.compare(off_median, params.color_threshold * 0.5, cv2.CMP_GT)
+    outlier = cv2.dilate(outlier, np.ones((3, 3), np.uint8))
+    agar = cv2.bitwise_and(valid, cv2.bitwise_not(outlier))  # 255 on the agar used
+    if cv2.countNonZero(agar) < 4:
+        agar = valid
+    if cv2.countNonZero(agar) < 1:
+        agar = np.full_like(valid, 255)
+    weight = cv2.multiply(agar, 1.0 / 255.0, dtype=cv2.CV_32F)  # 0 or 1
+    num = cv2.multiply(small, cv2.merge((weight, weight, weight)), dtype=cv2.CV_32F)
+    num = cv2.GaussianBlur(num, (0, 0), 2.0)
     den = cv2.GaussianBlur(weight, (0, 0), 2.0)
     far = den <= 0.05  # no agar nearby: use the dish's mean agar colour
     bg_small = num / np.maximum(den, 0.05)[..., None]
     if far.any():
-        bg_small[far] = small[weight > 0].mean(axis=0)
+        bg_small[far] = cv2.mean(small, agar)[:3]
     bg_small = cv2.convertScaleAbs(bg_small)
     # back to full size (a shift of (s - 1) / 2 px of this smooth field does not matter)
     sh, sw = bg_small.shape[:2]
     bg = cv2.resize(bg_small, (sw * s, sh * s), interpolation=cv2.INTER_LINEAR)[:h, :w]
-    sq = cv2.LUT(cv2.absdiff(roi, bg), _SQUARES)
+    diff = cv2.absdiff(roi, bg)
+    if tuple(params.channel_weights) == (1.0, 1.0, 1.0):
+        # the plain sum of squares, channel by channel into one plane (exact integers; a third
+        # of the memory traffic of a 3-channel float image of squares)
+        dev = np.zeros((h, w), np.float32)
+        for channel in cv2.split(diff):
+            cv2.accumulateSquare(channel, dev)
+        return dev
     weights = np.asarray(params.channel_weights, np.float32).reshape(1, 3)
-    return cv2.transform(sq, weights)
+    return cv2.transform(cv2.LUT(diff, _SQUARES), weights)
 
 
 def _gradients(dev: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -561,27 +594,63 @@ def _gradients(dev: np.ndarray, points: np.ndarray) -> np.ndarray:
 # Per-object measures
 
 
-@dataclass
-class _Body:
-    """An object that passed the artefact tests, with what classification needs."""
+_GAP = 2  # empty canvas rows between two bodies' crops (the 5x5 filters reach 2 px)
 
-    index: int
-    bbox: tuple[int, int, int, int]
+
+@dataclass
+class _Bodies:
+    """The objects that passed the moment tests, with their masks on one shared canvas.
+
+    Every body's crop (its bounding box grown by ``_PAD`` on every side) is copied to the
+    canvas at column 0 and an even row, below the previous one with ``_GAP`` empty rows
+    between them. No canvas row holds two bodies, so one OpenCV call (closing, distance
+    transform, dilation, connected components) treats all bodies at once and gives, inside
+    every crop, exactly what it gives on the crop alone (the crop's rim of ``_PAD`` px and the
+    gap rows are background), and a per-body reduction is a reduction over a range of rows.
+
+    Attributes
+    ----------
+    index : ndarray of int
+        Contour index of each body.
+    top, left : ndarray of int
+        The crop's origin (ROI pixels).
+    height, width : ndarray of int
+        The crop's size.
+    row : ndarray of int
+        The canvas row of the crop's first row (even).
+    row_body : ndarray of int
+        The body of every canvas row, -1 in the gaps.
+    mask : ndarray of uint8
+        Canvas of the bodies' masks (0 or 1).
+    dt : ndarray of float32
+        Their distance transform (3x3 L2 chamfer).
+    area : ndarray of float
+        Pixels in each body's mask.
+    r_in : ndarray of float
+        Largest inscribed radius (``dt``'s maximum in each crop).
+    stroke : ndarray of bool
+        Area above ``max_fill_ratio`` inscribed discs: a pen stroke (artefact).
+    concavity : ndarray of float
+        Depth of the deepest concavity over ``r_in`` (``inf`` where not measured).
+    """
+
+    index: np.ndarray
+    top: np.ndarray
+    left: np.ndarray
+    height: np.ndarray
+    width: np.ndarray
+    row: np.ndarray
+    row_body: np.ndarray
     mask: np.ndarray
     dt: np.ndarray
-    area: float
-    concavity: float
+    area: np.ndarray
+    r_in: np.ndarray
+    stroke: np.ndarray
+    concavity: np.ndarray
 
 
-def _measure(
-    contour: np.ndarray, index: int, fg: np.ndarray | None, params: PlateParams
-) -> _Body | str:
-    """Artefact tests of one contour (module docstring, step 3): a body or a reject reason.
-
-    The body's mask is the filled contour, restricted to the foreground ``fg`` (so a closed
-    loop of pen ink is not taken for a solid body) and closed with a 5x5 disc (so a crack of a
-    pixel or two where two species' colours meet at the edge does not read as a waist).
-    """
+def _moment_reject(contour: np.ndarray, params: PlateParams) -> str | None:
+    """Artefact tests of step 3 that need only the contour: the reject reason, or None."""
     m = cv2.moments(contour)
     area = m["m00"] + len(contour) / 2.0 + 1.0  # polygon through pixel centres + half-pixel rim
     if area < params.min_colony_area_px:
@@ -595,59 +664,141 @@ def _measure(
     spread = math.sqrt(((mu20 - mu02) / 2.0) ** 2 + mu11 * mu11)
     if half_trace + spread > params.max_elongation**2 * max(half_trace - spread, 1e-9):
         return "elongated"
-    x, y, bw, bh = bbox = cv2.boundingRect(contour)
-    shift = np.array([x - _PAD, y - _PAD], np.int32)
-    mask = np.zeros((bh + 2 * _PAD, bw + 2 * _PAD), np.uint8)
-    cv2.drawContours(mask, [contour - shift], -1, 1, -1)
+    return None
+
+
+def _measure_bodies(
+    contours: list[np.ndarray],
+    fg: np.ndarray | None,
+    need_concavity: np.ndarray,
+    params: PlateParams,
+    rejected: dict[str, int],
+) -> _Bodies:
+    """Artefact tests (module docstring, step 3) and waists of all contours.
+
+    Contours failing a moment test are counted in ``rejected``; the others become bodies.
+    A body's mask is its filled contour, restricted to the foreground ``fg`` (so a closed loop
+    of pen ink is not taken for a solid body) and closed with a 5x5 disc (so a crack of a pixel
+    or two where two species' colours meet at the edge does not read as a waist). Strokes are
+    flagged in ``stroke`` (and counted). The concavity (the waist test of step 4) is measured
+    only for the contours where ``need_concavity`` is true (``inf`` elsewhere): the caller
+    leaves out those that cannot be a DES anyway (centroid outside or D_alpha too large).
+    """
+    survivors = []
+    for k, contour in enumerate(contours):
+        reason = _moment_reject(contour, params)
+        if reason is None:
+            survivors.append(k)
+        else:
+            rejected[reason] = rejected.get(reason, 0) + 1
+    index = np.array(survivors, dtype=np.intp)
+    kept = [contours[k] for k in survivors]
+    if not kept:
+        none, empty = np.zeros(0, np.intp), np.zeros(0)
+        canvas_none = np.zeros((0, 1), np.uint8)
+        return _Bodies(
+            none, none, none, none, none, none, none, canvas_none,
+            canvas_none.astype(np.float32), empty, empty, empty.astype(bool), empty,
+        )  # fmt: skip
+    boxes = np.array([cv2.boundingRect(c) for c in kept], np.intp).reshape(-1, 4)
+    left, top = boxes[:, 0] - _PAD, boxes[:, 1] - _PAD
+    width, height = boxes[:, 2] + 2 * _PAD, boxes[:, 3] + 2 * _PAD
+    slot = (height + _GAP + 1) // 2 * 2  # rows taken on the canvas (even)
+    row = np.cumsum(slot) - slot
+    n_rows = int(slot.sum())
+    row_body = np.repeat(np.arange(len(kept)), slot)
+    row_body[np.arange(n_rows) - row[row_body] >= height[row_body]] = -1
+    canvas = (n_rows, int(width.max(initial=1)))
+
+    # the contours moved to the canvas, all drawn (filled) at once: one body per canvas row
+    lengths = [len(c) for c in kept]
+    shift = np.stack((-left, row - top), axis=1).astype(np.int32)
+    moved = np.split(
+        np.concatenate(kept).reshape(-1, 2) + np.repeat(shift, lengths, axis=0),
+        np.cumsum(lengths)[:-1],
+    )
+    mask = np.zeros(canvas, np.uint8)
+    cv2.drawContours(mask, [c.reshape(-1, 1, 2) for c in moved], -1, 1, -1)
     if fg is not None:
-        mask &= fg[y - _PAD : y + bh + _PAD, x - _PAD : x + bw + _PAD] > 0
-        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _DISC5)
+        fg_canvas = np.zeros(canvas, np.uint8)
+        for r, t, lft, h, w in zip(row, top, left, height, width, strict=True):
+            fg_canvas[r : r + h, :w] = fg[t : t + h, lft : lft + w]
+        mask = cv2.morphologyEx(cv2.min(mask, fg_canvas), cv2.MORPH_CLOSE, _DISC5)
     dt = cv2.distanceTransform(mask, cv2.DIST_L2, 3)
-    r_in = float(dt.max())
-    pixel_area = float(np.count_nonzero(mask))
-    if pixel_area > params.max_fill_ratio * math.pi * r_in * r_in:
-        return "stroke"
-    # deepest concavity: largest distance from the hull's outline of a hull pixel not in the body
-    hull_mask = np.zeros_like(mask)
-    cv2.fillConvexPoly(hull_mask, cv2.convexHull(contour) - shift, 1)
-    pocket = hull_mask > mask
-    depth = 0.0
-    if pocket.any():
-        depth = float(cv2.distanceTransform(hull_mask, cv2.DIST_L2, 3)[pocket].max())
-    return _Body(index, bbox, mask, dt, pixel_area, depth / max(r_in, 1.0))
+    r_in = np.maximum.reduceat(dt.max(axis=1), row).astype(np.float64)
+    area = np.add.reduceat(np.count_nonzero(mask, axis=1), row).astype(np.float64)
+    stroke = area > params.max_fill_ratio * math.pi * r_in * r_in
+    if stroke.any():
+        rejected["stroke"] = rejected.get("stroke", 0) + int(stroke.sum())
+
+    # deepest concavity: largest distance from the hull's outline of a hull pixel not in the
+    # body (0 when there is no such pixel)
+    concavity = np.full(len(kept), math.inf)
+    wanted = need_concavity[index] & ~stroke
+    if wanted.any():
+        hulls = np.zeros(canvas, np.uint8)
+        for i in np.flatnonzero(wanted):
+            cv2.fillConvexPoly(hulls, cv2.convexHull(moved[i]), 1)
+        pocket = cv2.compare(hulls, mask, cv2.CMP_GT)
+        hull_dt = cv2.distanceTransform(hulls, cv2.DIST_L2, 3)
+        hull_dt[pocket == 0] = 0.0
+        depth = np.maximum.reduceat(hull_dt.max(axis=1), row).astype(np.float64)
+        concavity[wanted] = depth[wanted] / np.maximum(r_in[wanted], 1.0)
+    return _Bodies(
+        index, top, left, height, width, row, row_body, mask, dt, area, r_in, stroke, concavity
+    )
 
 
-def _mix_scores(roi: np.ndarray, bodies: list[_Body], params: PlateParams) -> np.ndarray:
-    """Mixed-colony score of every body at once (module docstring, step 4).
+def _mix_scores(
+    roi: np.ndarray, bodies: _Bodies, which: np.ndarray, params: PlateParams
+) -> np.ndarray:
+    """Mixed-colony score of the bodies where ``which`` is true, all at once (step 4; 0 elsewhere).
 
     Per body, the inner pixels' B, G, R are fitted by ``c0 + c1 s + c2 s^2`` with ``s`` the
     distance to the boundary over its maximum (least squares, solved for all bodies together);
     the score is the fraction of inner pixels farther than ``mix_residual`` from the fit. Every
-    second row and column is used (a speckle of 2 px radius still gives samples).
+    second row and column of the body's crop is used (a speckle of 2 px radius still gives
+    samples).
     """
-    colours, depths = [], []
-    for body in bodies:
-        x, y, bw, bh = body.bbox
-        dt = body.dt[::2, ::2]
-        inner = dt >= params.edge_skip_px
-        colours.append(roi[y - _PAD : y + bh + _PAD : 2, x - _PAD : x + bw + _PAD : 2][inner])
-        depths.append(dt[inner] * np.float32(1.0 / max(float(body.dt.max()), 1e-6)))
-    sizes = np.array([len(d) for d in depths])
-    k = len(bodies)
+    k = len(bodies.index)
+    score = np.zeros(k)
+    # inner samples: every second row and column of the crops (crops start at even rows)
+    dt = bodies.dt[::2, ::2]
+    body_of_row = bodies.row_body[::2]
+    row_wanted = (body_of_row >= 0) & which[np.maximum(body_of_row, 0)]
+    inner = (dt >= params.edge_skip_px) & row_wanted[:, None]
+    sub_y, sub_x = np.nonzero(inner)  # body after body, each in raster order
+    label = body_of_row[sub_y]
+    crop_y, crop_x = 2 * sub_y - bodies.row[label], 2 * sub_x
+    in_crop = crop_x < bodies.width[label]
+    if not in_crop.all():  # edge_skip_px <= 0 takes in the background beside the crop
+        sub_y, sub_x, label = sub_y[in_crop], sub_x[in_crop], label[in_crop]
+        crop_y, crop_x = crop_y[in_crop], crop_x[in_crop]
+    sizes = np.bincount(label, minlength=k)
     if sizes.sum() == 0:
-        return np.zeros(k)
-    label = np.repeat(np.arange(k), sizes)
-    c = np.concatenate(colours).astype(np.float32)
-    s = np.concatenate(depths)
+        return score
+    starts = np.cumsum(sizes) - sizes
+    c = roi[bodies.top[label] + crop_y, bodies.left[label] + crop_x].astype(np.float32)
+    depth_scale = (1.0 / np.maximum(bodies.r_in, 1e-6)).astype(np.float32)
+    s = dt[sub_y, sub_x] * depth_scale[label]  # normalised depth, 0 at the boundary
     s2 = s * s
-    feats = (np.ones_like(s), s, s2, s2 * s, s2 * s2)
-    sums = np.stack([np.bincount(label, f, minlength=k) for f in feats], axis=1)  # (k, 5)
+    # per-body sums of every product the normal equations need, in one pass (one row per
+    # pixel; summed row after row, i.e. in pixel order, per body)
+    products = np.empty((len(s), 14))
+    products[:, 0] = 1.0
+    products[:, 1] = s
+    products[:, 2] = s2
+    products[:, 3] = s2 * s
+    products[:, 4] = s2 * s2
+    products[:, 5:8] = c  # times s ** 0
+    products[:, 8:11] = s[:, None] * c
+    products[:, 11:14] = s2[:, None] * c
+    nonempty = sizes > 0
+    sums = np.zeros((k, 14))
+    sums[nonempty] = np.add.reduceat(products, starts[nonempty], axis=0)
     gram = np.stack([sums[:, i : i + 3] for i in range(3)], axis=1) + np.eye(3) * 1e-6
-    rhs = np.empty((k, 3, 3))
-    for i in range(3):
-        for ch in range(3):
-            rhs[:, i, ch] = np.bincount(label, feats[i] * c[:, ch], minlength=k)
-    coef = np.repeat(np.linalg.solve(gram, rhs).astype(np.float32), sizes, axis=0)
+    rhs = sums[:, 5:14].reshape(k, 3, 3)  # [body, power of s, channel]
+    coef = np.linalg.solve(gram, rhs).astype(np.float32)[label]
     resid = c - (coef[:, 0] + s[:, None] * coef[:, 1] + s2[:, None] * coef[:, 2])
     off = np.einsum("ij,ij->i", resid, resid) > params.mix_residual**2
     score = np.bincount(label, off, minlength=k) / np.maximum(sizes, 1)
@@ -655,32 +806,78 @@ def _mix_scores(roi: np.ndarray, bodies: list[_Body], params: PlateParams) -> np
     return score
 
 
-def _merged_count(dt: np.ndarray, valley_ratio: float) -> int:
-    """Colonies in a merged body from the peaks of its distance transform (at least 2)."""
-    peak_max = float(dt.max())
-    dil = cv2.dilate(dt, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
-    cand = ((dt >= dil) & (dt >= max(2.0, 0.3 * peak_max))).astype(np.uint8)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(cand, connectivity=8)
-    peaks = []
-    for i in range(1, n):  # one peak per plateau, at its highest pixel
-        x, y, bw, bh = stats[i, :4]
-        sub = np.where(labels[y : y + bh, x : x + bw] == i, dt[y : y + bh, x : x + bw], -1.0)
-        j = int(np.argmax(sub))
-        peaks.append((x + j % bw, y + j // bw, float(sub.flat[j])))
-    peaks.sort(key=lambda p: -p[2])
-    kept: list[tuple[int, int, float]] = []
-    for px, py, pv in peaks:
-        separate = True
-        for qx, qy, qv in kept:
-            m = int(math.hypot(px - qx, py - qy)) + 2
-            lx = np.linspace(px, qx, m).round().astype(np.intp)
-            ly = np.linspace(py, qy, m).round().astype(np.intp)
-            if dt[ly, lx].min() >= valley_ratio * min(pv, qv):
-                separate = False
-                break
-        if separate:
-            kept.append((px, py, pv))
-    return max(2, len(kept))
+def _merged_counts(bodies: _Bodies, which: np.ndarray, valley_ratio: float) -> np.ndarray:
+    """Colonies in each merged body (where ``which`` is true; 1 elsewhere), all at once.
+
+    Step 5: one peak per plateau of the distance transform's local maxima (5x5), above
+    ``max(2, 0.3 r_in)``, at its highest pixel (the first in raster order on a tie); peaks are
+    taken greedily from the highest (plateaus of equal height in the order OpenCV labels a
+    crop: by their first 2x2 block in raster order), and a peak is kept when the straight
+    segment to every peak kept before it dips below ``valley_ratio`` times the lower of the
+    two. At least 2. The segments between all pairs of peaks of a body are sampled at once.
+    """
+    counts = np.ones(len(bodies.index), np.intp)
+    if not which.any():
+        return counts
+    counts[which] = 2
+    # a smaller canvas of only these bodies' slots (the layout's rules still hold)
+    slot = np.diff(np.append(bodies.row, len(bodies.row_body)))
+    rows = which[np.repeat(np.arange(len(slot)), slot)]
+    dt, row_body = bodies.dt[rows], bodies.row_body[rows]
+    first_row = np.zeros(len(slot), np.intp)
+    first_row[which] = np.cumsum(slot[which]) - slot[which]
+    floor = np.maximum(2.0, 0.3 * bodies.r_in)
+    floor_of_row = np.where(row_body >= 0, floor[np.maximum(row_body, 0)], np.inf)
+    cand = (dt >= cv2.dilate(dt, _DISC5)) & (dt >= floor_of_row[:, None])
+    n, labels = cv2.connectedComponents(cand.view(np.uint8), connectivity=8)
+    if n <= 1:
+        return counts
+    ys, xs = np.nonzero(cand)  # raster order
+    plateau, value = labels[ys, xs], dt[ys, xs]
+    order = np.lexsort((-value, plateau))  # by plateau, highest first, raster order on ties
+    first = order[np.searchsorted(plateau[order], np.arange(1, n))]
+    first_block = np.full(n, np.iinfo(np.intp).max)
+    np.minimum.at(first_block, plateau, (ys // 2) * dt.shape[1] + xs // 2)
+    peaks = first[np.argsort(first_block[1:], kind="stable")]  # body after body (rows)
+    body = row_body[ys[peaks]]
+    pv = value[peaks].astype(np.float64)
+    peaks = peaks[np.lexsort((-pv, body))]  # per body, highest first (stable on ties)
+    body, pv = row_body[ys[peaks]], value[peaks].astype(np.float64)
+    px, py = xs[peaks], ys[peaks] - first_row[body]  # crop coordinates
+    # every pair (j, i) of peaks of one body with i before j
+    bounds = np.flatnonzero(np.diff(body, prepend=-1, append=-1))
+    pairs = [
+        (j, i)
+        for lo, hi in itertools.pairwise(bounds.tolist())
+        for j in range(lo + 1, hi)
+        for i in range(lo, j)
+    ]
+    if not pairs:
+        return counts
+    jj, ii = np.array(pairs, np.intp).T
+    # the segment from peak j to peak i, sampled as np.linspace(p_j, p_i, m) in crop pixels
+    dx, dy = px[ii] - px[jj], py[ii] - py[jj]
+    m = np.sqrt((dx * dx + dy * dy).astype(np.float64)).astype(np.intp) + 2
+    seg_start = np.cumsum(m) - m
+    pair = np.repeat(np.arange(len(m)), m)
+    t = (np.arange(pair.size) - seg_start[pair]).astype(np.float64)
+    lx = t * (dx / (m - 1))[pair] + px[jj][pair]
+    ly = t * (dy / (m - 1))[pair] + py[jj][pair]
+    last = seg_start + m - 1
+    lx[last], ly[last] = px[ii], py[ii]
+    samples = dt[ly.round().astype(np.intp) + first_row[body[jj]][pair], lx.round().astype(np.intp)]
+    valley = np.minimum.reduceat(samples, seg_start)  # lowest point of every segment
+    joined = valley >= valley_ratio * np.minimum(pv[jj], pv[ii])  # no waist between j and i
+    joined_to: dict[int, set[int]] = {}
+    for j, i in zip(jj[joined].tolist(), ii[joined].tolist(), strict=True):
+        joined_to.setdefault(j, set()).add(i)
+    for lo, hi in itertools.pairwise(bounds.tolist()):
+        kept: list[int] = []
+        for j in range(lo, hi):
+            if not joined_to.get(j, set()).intersection(kept):
+                kept.append(j)
+        counts[body[lo]] = max(2, len(kept))
+    return counts
 
 
 # --------------------------------------------------------------------------------------------
@@ -713,56 +910,64 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     params = PlateParams() if params is None else params
     img = _as_bgr(image)
     h, w = img.shape[:2]
+    stage_ms: dict[str, float] = {}
+    t_stage = t0
+
+    def stage_done(name: str) -> None:
+        nonlocal t_stage
+        now = time.perf_counter()
+        stage_ms[name] = (now - t_stage) * 1000.0
+        t_stage = now
+
     dish, (x0, y0, _, _), usable = _usable_area(img, params)
     roi = img[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
+    stage_done("dish")
 
     if params.method == "detector":
         objects = _objects_by_detector(roi, usable, params)
     else:
         objects = _objects_by_segmentation(roi, usable, params)
     contours, d_alpha, inside, centroids, rejected, fg = objects
+    stage_done("objects")
 
-    bodies: list[_Body] = []
-    for k, contour in enumerate(contours):
-        body = _measure(contour, k, fg, params)
-        if isinstance(body, str):
-            rejected[body] = rejected.get(body, 0) + 1
-        else:
-            bodies.append(body)
-    des = [
-        bool(inside[b.index])
-        and d_alpha[b.index] < params.des_threshold_deg
-        and b.concavity < params.max_concavity
-        for b in bodies
-    ]
-    mix = np.zeros(len(bodies))
-    des_idx = [i for i, d in enumerate(des) if d]
-    if des_idx:
-        mix[des_idx] = _mix_scores(roi, [bodies[i] for i in des_idx], params)
+    # a DES needs its centroid inside and a small D_alpha; only then does the waist matter
+    des_shape = np.asarray(inside, bool) & (np.asarray(d_alpha) < params.des_threshold_deg)
+    bodies = _measure_bodies(contours, fg, des_shape, params, rejected)
+    des = des_shape[bodies.index] & (bodies.concavity < params.max_concavity) & ~bodies.stroke
+    stage_done("measures")
+    merged = ~des & ~bodies.stroke
+    mix = _mix_scores(roi, bodies, des, params)
+    counts = _merged_counts(bodies, merged, params.valley_ratio)
 
     colonies: list[Colony] = []
-    for body, is_des, score in zip(bodies, des, mix, strict=True):
-        if is_des:
-            klass = "mixed" if score >= params.mix_fraction else "authentic"
-            count = 1
-        else:
-            klass, count = "merged", _merged_count(body.dt, params.valley_ratio)
-        k = body.index
+    for b, k in enumerate(bodies.index.tolist()):
+        if bodies.stroke[b]:
+            continue
+        klass = "merged"
+        if des[b]:
+            klass = "mixed" if mix[b] >= params.mix_fraction else "authentic"
         colonies.append(
             Colony(
                 id=len(colonies),
                 centroid=(float(centroids[k][0] + x0), float(centroids[k][1] + y0)),
                 klass=klass,
-                area_px=body.area,
+                area_px=float(bodies.area[b]),
                 d_alpha_median=float(d_alpha[k]),
-                estimated_count=count,
+                estimated_count=int(counts[b]),
                 contour=contours[k].reshape(-1, 2).astype(float) + np.array([x0, y0]),
-                mix_score=float(score),
+                mix_score=float(mix[b]),
             )
         )
+    stage_done("classes")
     timing = (time.perf_counter() - t0) * 1000.0
     return PlateResult(
-        width=w, height=h, timing_ms=timing, dish=dish, colonies=colonies, rejected=rejected
+        width=w,
+        height=h,
+        timing_ms=timing,
+        dish=dish,
+        colonies=colonies,
+        rejected=rejected,
+        stage_ms=stage_ms,
     )
 
 
@@ -772,10 +977,19 @@ _Objects = tuple[
 ]
 
 
-def _border(usable: np.ndarray, width: int) -> np.ndarray:
-    """True on pixels within ``width`` px of the usable area's outline (or outside it)."""
-    kernel = np.ones((2 * width + 1, 2 * width + 1), np.uint8)
-    return cv2.erode(usable, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0) == 0
+def _at_rim(usable: np.ndarray, contours: list[np.ndarray]) -> np.ndarray:
+    """True for every contour with a point within ``_PAD`` px of the usable area's outline.
+
+    The usable mask is eroded by a square of ``2 * _PAD + 1`` (one full-size pass) and read
+    only at the contours' points, all at once.
+    """
+    if not contours:
+        return np.zeros(0, bool)
+    kernel = np.ones((2 * _PAD + 1, 2 * _PAD + 1), np.uint8)
+    inner = cv2.erode(usable, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    points = np.concatenate(contours).reshape(-1, 2)
+    starts = np.cumsum([0] + [len(c) for c in contours[:-1]])
+    return np.logical_or.reduceat(inner[points[:, 1], points[:, 0]] == 0, starts)
 
 
 def _objects_by_segmentation(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> _Objects:
@@ -783,20 +997,17 @@ def _objects_by_segmentation(roi: np.ndarray, usable: np.ndarray, params: PlateP
     dev = _deviation(roi, usable, params)
     fg = cv2.bitwise_and(cv2.compare(dev, params.color_threshold, cv2.CMP_GT), usable)
     found, _ = cv2.findContours(fg, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    border = _border(usable, _PAD)
-    rejected = {"dust": 0, "rim": 0}
     min_points = max(4, int(2.0 * math.sqrt(params.min_colony_area_px)))
-    kept = []
-    for c in found:
-        if len(c) < min_points:
-            rejected["dust"] += 1
-        elif border[c[:, 0, 1], c[:, 0, 0]].any():
-            rejected["rim"] += 1
-        else:
-            kept.append(c)
+    candidates = [c for c in found if len(c) >= min_points]
+    rejected = {"dust": len(found) - len(candidates), "rim": 0}
+    if not candidates:
+        return [], np.zeros(0), np.zeros(0, bool), np.zeros((0, 2)), rejected, fg
+    at_rim = _at_rim(usable, candidates)
+    kept = [c for c, rim in zip(candidates, at_rim.tolist(), strict=True) if not rim]
+    rejected["rim"] = len(candidates) - len(kept)
     if not kept:
         return [], np.zeros(0), np.zeros(0, bool), np.zeros((0, 2)), rejected, fg
-    offsets = np.concatenate(([0], np.cumsum([len(c) for c in kept])))
+    offsets = np.cumsum([0] + [len(c) for c in kept])
     points = np.concatenate(kept).reshape(-1, 2)
     grads = _gradients(dev, points)
     sa = shape_angles(
@@ -811,10 +1022,10 @@ def _objects_by_detector(roi: np.ndarray, usable: np.ndarray, params: PlateParam
     painted = roi.copy()
     painted[usable == 0] = agar
     result = detect(painted, params.detector)
-    border = _border(usable, _PAD)
     h, w = usable.shape
     contours, d_alpha, inside, centroids = [], [], [], []
     rejected = {"open": 0, "rim": 0}
+    closed, closed_points = [], []
     for obj in result.objects:
         if not obj.closed:
             rejected["open"] += 1
@@ -822,7 +1033,10 @@ def _objects_by_detector(roi: np.ndarray, usable: np.ndarray, params: PlateParam
         pts = np.round(np.asarray(obj.points, dtype=float)).astype(np.int32)
         pts[:, 0] = np.clip(pts[:, 0], 0, w - 1)
         pts[:, 1] = np.clip(pts[:, 1], 0, h - 1)
-        if border[pts[:, 1], pts[:, 0]].any():
+        closed.append(obj)
+        closed_points.append(pts)
+    for obj, pts, rim in zip(closed, closed_points, _at_rim(usable, closed_points), strict=True):
+        if rim:
             rejected["rim"] += 1
             continue
         contours.append(pts.reshape(-1, 1, 2))

@@ -1,0 +1,173 @@
+"""The vectorised per-object stages of plate analysis against plain per-body references.
+
+``analyze_plate`` measures all bodies on one shared canvas and computes mixed-colony scores and
+merged counts for all bodies at once. These tests keep the straightforward per-body versions
+(one crop per body, one body at a time) as references and require the same numbers, exactly.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from labauto.vision import plate as plate_module
+from labauto.vision.plate import PlateParams, analyze_plate
+
+PAD = plate_module._PAD
+DISC5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+
+
+def _reference_body(contour: np.ndarray, fg: np.ndarray, params: PlateParams) -> dict | None:
+    """Mask, distance transform and waist of one body in its own crop (None if a stroke)."""
+    x, y, bw, bh = cv2.boundingRect(contour)
+    shift = np.array([x - PAD, y - PAD], np.int32)
+    mask = np.zeros((bh + 2 * PAD, bw + 2 * PAD), np.uint8)
+    cv2.drawContours(mask, [contour - shift], -1, 1, -1)
+    mask &= fg[y - PAD : y + bh + PAD, x - PAD : x + bw + PAD] > 0
+    mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, DISC5)
+    dt = cv2.distanceTransform(mask, cv2.DIST_L2, 3)
+    r_in = float(dt.max())
+    area = float(np.count_nonzero(mask))
+    if area > params.max_fill_ratio * math.pi * r_in * r_in:
+        return None
+    hull = np.zeros_like(mask)
+    cv2.fillConvexPoly(hull, cv2.convexHull(contour) - shift, 1)
+    pocket = hull > mask
+    depth = float(cv2.distanceTransform(hull, cv2.DIST_L2, 3)[pocket].max()) if pocket.any() else 0
+    return {
+        "bbox": (x, y, bw, bh),
+        "mask": mask,
+        "dt": dt,
+        "area": area,
+        "r_in": r_in,
+        "concavity": depth / max(r_in, 1.0),
+    }
+
+
+def _reference_merged_count(dt: np.ndarray, valley_ratio: float) -> int:
+    """Step 5 on one body's crop, peak after peak."""
+    peak_max = float(dt.max())
+    dil = cv2.dilate(dt, DISC5)
+    cand = ((dt >= dil) & (dt >= max(2.0, 0.3 * peak_max))).astype(np.uint8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(cand, connectivity=8)
+    peaks = []
+    for i in range(1, n):
+        x, y, bw, bh = stats[i, :4]
+        sub = np.where(labels[y : y + bh, x : x + bw] == i, dt[y : y + bh, x : x + bw], -1.0)
+        j = int(np.argmax(sub))
+        peaks.append((x + j % bw, y + j // bw, float(sub.flat[j])))
+    peaks.sort(key=lambda p: -p[2])
+    kept: list[tuple[int, int, float]] = []
+    for px, py, pv in peaks:
+        separate = True
+        for qx, qy, qv in kept:
+            m = int(math.hypot(px - qx, py - qy)) + 2
+            lx = np.linspace(px, qx, m).round().astype(np.intp)
+            ly = np.linspace(py, qy, m).round().astype(np.intp)
+            if dt[ly, lx].min() >= valley_ratio * min(pv, qv):
+                separate = False
+                break
+        if separate:
+            kept.append((px, py, pv))
+    return max(2, len(kept))
+
+
+def _reference_mix_score(roi: np.ndarray, body: dict, params: PlateParams) -> float:
+    """Step 4's mixed-colony score of one body on its own."""
+    x, y, bw, bh = body["bbox"]
+    dt = body["dt"][::2, ::2]
+    inner = dt >= params.edge_skip_px
+    c = roi[y - PAD : y + bh + PAD : 2, x - PAD : x + bw + PAD : 2][inner].astype(np.float32)
+    if len(c) < 8:
+        return 0.0
+    s = dt[inner] * np.float32(1.0 / max(body["r_in"], 1e-6))
+    s2 = s * s
+    feats = (np.ones_like(s), s, s2, s2 * s, s2 * s2)
+    sums = [float(np.sum(f.astype(np.float64))) for f in feats]
+    gram = np.array([sums[i : i + 3] for i in range(3)]) + np.eye(3) * 1e-6
+    rhs = np.array([[np.sum((feats[i] * c[:, ch]).astype(np.float64)) for ch in range(3)]
+                    for i in range(3)])  # fmt: skip
+    coef = np.linalg.solve(gram, rhs).astype(np.float32)
+    resid = c - (coef[0] + s[:, None] * coef[1] + s2[:, None] * coef[2])
+    return float(np.mean(np.einsum("ij,ij->i", resid, resid) > params.mix_residual**2))
+
+
+@pytest.fixture(scope="module")
+def stages(plates: list) -> list[tuple]:
+    """For three plates: the ROI, contours, foreground, D_alpha test and measured bodies."""
+    params = PlateParams()
+    out = []
+    for img, _ in plates[:3]:
+        _, (x0, y0, _, _), usable = plate_module._usable_area(img, params)
+        roi = img[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
+        contours, d_alpha, inside, _, rejected, fg = plate_module._objects_by_segmentation(
+            roi, usable, params
+        )
+        des_shape = np.asarray(inside, bool) & (d_alpha < params.des_threshold_deg)
+        bodies = plate_module._measure_bodies(contours, fg, des_shape, params, rejected)
+        out.append((roi, contours, fg, des_shape, bodies))
+    return out
+
+
+def test_canvas_measures_equal_per_crop_measures(stages: list) -> None:
+    params = PlateParams()
+    for _, contours, fg, des_shape, bodies in stages:
+        assert len(bodies.index) > 20
+        for b, k in enumerate(bodies.index):
+            ref = _reference_body(contours[k], fg, params)
+            assert bodies.stroke[b] == (ref is None)
+            if ref is None:
+                continue
+            rows = slice(bodies.row[b], bodies.row[b] + bodies.height[b])
+            cols = slice(0, bodies.width[b])
+            np.testing.assert_array_equal(bodies.mask[rows, cols], ref["mask"])
+            np.testing.assert_array_equal(bodies.dt[rows, cols], ref["dt"])
+            assert bodies.area[b] == ref["area"] and bodies.r_in[b] == ref["r_in"]
+            if des_shape[k]:
+                assert bodies.concavity[b] == ref["concavity"]
+            else:
+                assert bodies.concavity[b] == math.inf  # not needed: never a DES
+
+
+def test_vectorised_mix_scores_and_merged_counts_equal_per_body(stages: list) -> None:
+    params = PlateParams()
+    for roi, contours, fg, _, bodies in stages:
+        everyone = ~bodies.stroke
+        scores = plate_module._mix_scores(roi, bodies, everyone, params)
+        counts = plate_module._merged_counts(bodies, everyone, params.valley_ratio)
+        for b, k in enumerate(bodies.index):
+            if not everyone[b]:
+                assert scores[b] == 0.0 and counts[b] == 1
+                continue
+            ref = _reference_body(contours[k], fg, params)
+            assert scores[b] == pytest.approx(_reference_mix_score(roi, ref, params), abs=1e-12)
+            assert counts[b] == _reference_merged_count(ref["dt"], params.valley_ratio)
+
+
+def test_unit_weight_deviation_equals_the_weighted_formula(plates: list) -> None:
+    img, _ = plates[4]
+    params = PlateParams()
+    _, (x0, y0, _, _), usable = plate_module._usable_area(img, params)
+    roi = img[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
+    fast = plate_module._deviation(roi, usable, params)
+    general = plate_module._deviation(roi, usable, PlateParams(channel_weights=[1.0, 1.0, 1.0]))
+    np.testing.assert_array_equal(fast, general)
+    halved = plate_module._deviation(roi, usable, PlateParams(channel_weights=(0.5, 0.5, 0.5)))
+    np.testing.assert_allclose(halved, fast / 2, rtol=1e-6)
+
+
+def test_fit_circle_is_exact_on_a_circle_far_from_the_origin() -> None:
+    t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    cx, cy, r = plate_module._fit_circle(900.25 + 410.5 * np.cos(t), 700.75 + 410.5 * np.sin(t))
+    assert (cx, cy, r) == pytest.approx((900.25, 700.75, 410.5), abs=1e-9)
+
+
+def test_stage_times_are_reported(plates: list) -> None:
+    result = analyze_plate(plates[0][0])
+    assert list(result.stage_ms) == ["dish", "objects", "measures", "classes"]
+    assert all(v >= 0 for v in result.stage_ms.values())
+    assert sum(result.stage_ms.values()) <= result.timing_ms + 1e-6
+    assert "stage_ms" not in result.to_dict()
