@@ -32,7 +32,7 @@ class DeviceRefused(DeviceError):
 
 
 class DeviceFault(DeviceError):
-    """The device reported an error or fault state of its own (e.g. GRBL error:N, analyzer error)."""
+    """The device reported an error or fault of its own (e.g. GRBL error:N, analyzer error)."""
 
     def __init__(self, message: str, *, device: str = "device", code: int | None = None) -> None:
         super().__init__(message, device=device)

@@ -83,8 +83,12 @@ def labauto_register_drivers(register):
 
 @hookimpl
 def labauto_detections_stored(run_id, image_id, plate, count):
-    EVENTS.append(("detections_stored", {"run_id": run_id, "image_id": image_id,
-                                          "plate": plate, "count": count}))
+    EVENTS.append(
+        (
+            "detections_stored",
+            {"run_id": run_id, "image_id": image_id, "plate": plate, "count": count},
+        )
+    )
 
 
 @hookimpl
