@@ -47,7 +47,7 @@ Detection = tuple[float, float, float | None, float | None]  # cx, cy, a, b
 def _detect_fn(api: bool) -> tuple[str, Callable]:
     if api:
         try:
-            from labauto import detect as api_detect  # the lead's public wrapper
+            from labauto import detect as api_detect  # the public API
 
             return "labauto.detect", lambda img, p: api_detect(img, **p.__dict__)
         except ImportError:

@@ -8,7 +8,8 @@ percentile over all plates x repeats) and score, in the same run:
 * ``analyze_plate``: the default pipeline (dish detection, eq. 1 segmentation, D_alpha, waist,
   mixed-colony test, merged counts);
 * ``analyze_plate (region)``: the same with the dish given (no dish detection);
-* ``analyze_plate (V1 detector)``: objects from V1's ``detect`` (method "color") instead;
+* ``analyze_plate (generic detector)``: objects from ``labauto.vision.detector.detect``
+  (method "color") instead;
 * a plain OpenCV baseline: the dish by ``cv2.HoughCircles`` on a subsampled grey image, grey
   deviation from the dish's median grey, Otsu threshold, ``cv2.findContours``, an area filter,
   ``cv2.fitEllipse``; a body whose area is at least 90 % of its fitted ellipse's is authentic,
@@ -36,6 +37,7 @@ import numpy as np
 
 from labauto.synthetic.plates import PlateTruth, generate_plate, score_plate
 from labauto.vision.detector import DetectorParams
+from labauto.vision.dish import hough_dish
 from labauto.vision.plate import PlateParams, analyze_plate
 
 AGARS = ("amber", "red_blood", "chocolate", "clear", "macconkey", "chromogenic")
@@ -51,22 +53,10 @@ class _Reported:
 def baseline(image: np.ndarray) -> list[_Reported]:
     """The plain OpenCV pipeline described in the module docstring."""
     h, w = image.shape[:2]
-    step = max(1, min(h, w) // 128)
-    small = cv2.resize(image, (w // step, h // step), interpolation=cv2.INTER_NEAREST)
-    small = cv2.GaussianBlur(cv2.cvtColor(small, cv2.COLOR_BGR2GRAY), (5, 5), 1.0)
-    circles = cv2.HoughCircles(
-        small,
-        cv2.HOUGH_GRADIENT,
-        dp=1,
-        minDist=max(small.shape),
-        param1=60,
-        param2=15,
-        minRadius=int(0.3 * min(h, w) / step),
-        maxRadius=int(0.5 * min(h, w) / step),
-    )
-    if circles is None:
+    guess = hough_dish(image)
+    if guess is None:
         return []
-    cx, cy, r = (float(v) * step for v in circles[0, 0])
+    cx, cy, r = guess
     r -= 45.0  # the wall and a margin (the Hough circle tends to sit on the outer rim)
     grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
     mask = np.zeros((h, w), np.uint8)
@@ -140,9 +130,9 @@ def main() -> None:
         ("analyze_plate", ours("analyze_plate"), args.repeats),
         ("analyze_plate (region)", ours_region, args.repeats),
         (
-            "analyze_plate (V1 detector)",
+            "analyze_plate (generic detector)",
             ours(
-                "analyze_plate (V1 detector)",
+                "analyze_plate (generic detector)",
                 PlateParams(method="detector", detector=DetectorParams(method="color")),
             ),
             max(args.repeats // 5, 1),
@@ -151,7 +141,7 @@ def main() -> None:
     ]
     print(
         f"{len(plates)} plates of 1280x1024, {cv2.getNumThreads()} OpenCV threads, "
-        f"{args.repeats} repeats (V1 detector row: fewer)"
+        f"{args.repeats} repeats (generic detector row: fewer)"
     )
     header = (
         f"{'method':30s} {'median ms':>10s} {'p90 ms':>8s} {'found':>8s} {'correct':>8s} "

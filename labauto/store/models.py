@@ -15,7 +15,7 @@ Conventions
   in degrees from +x toward +y (DESIGN.md). Deck positions are millimetres.
 * Constraint names follow :data:`NAMING_CONVENTION`, which Alembic's batch mode on SQLite needs.
 
-Choices beyond the brief
+Choices
 ------------------------
 * ``plates.name`` is unique: a plate's name is its label (barcode), so adding a plate again
   returns the stored one.
@@ -159,7 +159,7 @@ class Colony(Base):
 
     ``contour`` is a JSON list of ``[x, y]`` pixel points; ``estimated_count`` is the number of
     colonies the body is thought to hold (1 for an authentic colony). ``mix_score`` (beyond the
-    brief) keeps the colour/texture evidence behind the ``mixed`` class for the audit.
+    contract) keeps the colour/texture evidence behind the ``mixed`` class for the audit.
     """
 
     __tablename__ = "colonies"

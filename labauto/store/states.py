@@ -11,7 +11,7 @@ Run states (the style of Opentrons' engine and Bluesky's RunEngine)::
             running -> running                    (resume a run that crashed while running)
     idle | running | paused | stopping -> failed  (an error can happen in any live state)
 
-Choice beyond the brief: ``failed`` is reachable from every unfinished state (not only from
+Choice: ``failed`` is reachable from every unfinished state (not only from
 ``running``), so a fault during a pause, during cleanup or before the start can be recorded as
 what it is. ``stopped``, ``failed`` and ``succeeded`` are final.
 
@@ -22,7 +22,7 @@ Pick states::
     moving | picked | delivered -> unknown        (crash recovery: the outcome is not known)
     unknown -> planned                            (the operator confirmed the colony is untouched)
 
-Choice beyond the brief: ``unknown -> planned`` lets the operator release a flagged pick for a
+Choice: ``unknown -> planned`` lets the operator release a flagged pick for a
 retry after checking the plate; nothing else leaves ``unknown`` except ``failed``. ``analyzed``
 and ``failed`` are final.
 """

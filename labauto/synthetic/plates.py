@@ -17,7 +17,7 @@ picker's camera sees it, and returns it with the ground truth of everything draw
 * artefacts: pen strokes and paper labels on the rim, writing on the lid over the agar, thin
   scratches, dust specks smaller than any colony and glare streaks.
 
-Choices made where the brief is open (all geometry in pixels, scaled with ``min(w, h) / 1024``):
+Choices made where the paper is silent (all geometry in pixels, scaled with ``min(w, h) / 1024``):
 
 * Colonies never touch each other unless they are merged: bounding circles keep a gap of at least
   ``8 px``; colonies keep at least ``36 px`` from the agar's edge, artefacts keep ``6 px`` from

@@ -23,21 +23,14 @@ import numpy as np
 
 from labauto.vision.contours import Contours, canny_contours, color_contours
 from labauto.vision.ellipse import Ellipse
+from labauto.vision.ellipse_fit import fit_ellipses_geometric_batch
 from labauto.vision.gradient import as_uint8_image
+from labauto.vision.harmonics import classify_shapes
 from labauto.vision.shape_angle import (
     DEFAULT_DES_THRESHOLD_DEG,
     DEFAULT_MAX_GAP_FRACTION,
     shape_angles,
 )
-
-try:  # V2's modules (shape label, ellipse fit)
-    from labauto.vision.harmonics import classify_shapes
-except ImportError:  # pragma: no cover - TODO(V2): remove once harmonics.py is in place
-    classify_shapes = None
-try:
-    from labauto.vision.ellipse_fit import fit_ellipses_geometric_batch
-except ImportError:  # pragma: no cover - TODO(V2): remove once ellipse_fit.py is in place
-    fit_ellipses_geometric_batch = None
 
 #: Shape label given when classification is disabled or impossible.
 UNKNOWN_SHAPE = "unknown"
@@ -261,7 +254,7 @@ def _labels(
     params: DetectorParams,
 ) -> list[str]:
     """Shape label of every contour (step 4), all contours at once (:func:`classify_shapes`)."""
-    if not params.classify or classify_shapes is None:
+    if not params.classify:
         return [UNKNOWN_SHAPE] * len(contours)
     labels = classify_shapes(
         contours.points,
@@ -277,7 +270,7 @@ def _labels(
 def _fits(contours: Contours, des: np.ndarray, params: DetectorParams) -> list[Ellipse | None]:
     """Geometric ellipse of every DES (step 4), all DES in one batched fit; None elsewhere."""
     k = len(contours)
-    if not params.fit_ellipses or fit_ellipses_geometric_batch is None or not des.any():
+    if not params.fit_ellipses or not des.any():
         return [None] * k
     counts = contours.lengths
     points = contours.points[np.repeat(des, counts)]

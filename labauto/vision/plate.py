@@ -5,7 +5,7 @@ agar's colour, drops artefacts, and sorts the rest into authentic colonies (a de
 shape, DES), merged colonies (touching colonies, not a DES) and mixed colonies (a DES holding two
 species). Pure functions on arrays: no I/O.
 
-Pipeline and the choices it makes where the paper or the brief leave room:
+Pipeline and the choices it makes where the paper leaves room:
 
 1. **Dish.** Hough circle on a grey image subsampled to ~128 px, refined at full resolution:
    along 180 rays the agar's edge is where the colour first departs from the agar's by more than
@@ -24,9 +24,9 @@ Pipeline and the choices it makes where the paper or the brief leave room:
    deviation from the background over B, G, R (optionally weighted) exceeds
    ``color_threshold``; contours are traced in the 8-neighbourhood (OpenCV). The gradient at
    each contour point is a 5x5 Sobel of that deviation image: it points into every object,
-   whatever its colour. D_alpha, the centroid and the centroid-inside test come from V1's
+   whatever its colour. D_alpha, the centroid and the centroid-inside test come from
    :func:`labauto.vision.shape_angle.shape_angles`, vectorised over all contours.
-   ``method="detector"`` uses V1's :func:`labauto.vision.detector.detect` instead (slower).
+   ``method="detector"`` uses :func:`labauto.vision.detector.detect` instead (slower).
 3. **Artefacts** are dropped, in this order: ``area < min_colony_area_px`` (dust) or
    ``> max_colony_area_px``; mean width ``2 * area / perimeter < min_width_px`` (scratches, thin
    pen strokes: a disc of radius r gives r, a strip of width w gives w); elongation
@@ -67,6 +67,7 @@ import cv2
 import numpy as np
 
 from labauto.vision.detector import DetectorParams, detect
+from labauto.vision.dish import Dish, as_plate_image, find_dish
 from labauto.vision.shape_angle import shape_angles
 
 __all__ = [
@@ -92,7 +93,6 @@ _SOBEL5_Y = np.outer(_SOBEL5_DERIV, _SOBEL5_SMOOTH).ravel()
 _DY5, _DX5 = (g.ravel() for g in np.mgrid[-2:3, -2:3])
 _PAD = 3  # margin (px) around a body's mask; bodies this close to the usable border are dropped
 _DISC5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
-_DISH_EDGE_CONTRAST = 18.0  # colour distance (grey levels) from the agar that marks its edge
 
 
 @dataclass(frozen=True)
@@ -111,7 +111,7 @@ class PlateParams:
     rim_margin_px : float
         Width of the band inside the dish edge that is ignored (wall, labels, pen marks).
     method : str
-        ``"segmentation"`` (eq. 1 with a local background, default) or ``"detector"`` (V1's
+        ``"segmentation"`` (eq. 1 with a local background, default) or ``"detector"`` (the generic
         :func:`labauto.vision.detector.detect` on the dish with ``detector`` params).
     color_threshold : float
         ``t`` of eq. 1: summed squared deviation from the background (grey levels squared).
@@ -146,7 +146,7 @@ class PlateParams:
         Distance-transform dip between two peaks, relative to the lower peak, that separates two
         colonies of a merged body.
     detector : DetectorParams
-        Parameters passed to V1's detector when ``method == "detector"``.
+        Parameters passed to the generic detector when ``method == "detector"``.
     """
 
     region: Circle | Polygon | None = None
@@ -233,21 +233,6 @@ def _check_region(region: Any) -> None:
     )
 
 
-@dataclass(frozen=True)
-class Dish:
-    """The dish found (or configured): ``center`` (x, y) and ``radius`` in pixels."""
-
-    center: tuple[float, float]
-    radius: float
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return ``{"center": [x, y], "radius": r}``."""
-        return {
-            "center": [float(self.center[0]), float(self.center[1])],
-            "radius": float(self.radius),
-        }
-
-
 @dataclass
 class Colony:
     """One colony (or merged body) on the plate.
@@ -331,156 +316,6 @@ class PlateResult:
             "colonies": [c.to_dict() for c in self.colonies],
             "counts": self.counts,
         }
-
-
-# --------------------------------------------------------------------------------------------
-# Input
-
-
-def _as_bgr(image: Any) -> np.ndarray:
-    if not isinstance(image, np.ndarray):
-        raise ValueError(f"image must be a numpy array, got {type(image).__name__}")
-    if image.size == 0:
-        raise ValueError(f"image is empty (shape {image.shape})")
-    if image.ndim == 2:
-        image = image[..., None]
-    if image.ndim != 3 or image.shape[2] not in (1, 3, 4):
-        raise ValueError(f"image must be HxW, HxWx3 (BGR) or HxWx4, got shape {image.shape}")
-    if min(image.shape[:2]) < 64:
-        raise ValueError(f"image must be at least 64x64 pixels, got shape {image.shape}")
-    if image.dtype != np.uint8:
-        if image.dtype.kind not in "uif" or image.dtype == np.bool_:
-            raise ValueError(f"image dtype must be uint8 or a real number type, got {image.dtype}")
-        if image.dtype.kind == "f" and not np.all(np.isfinite(image)):
-            raise ValueError("image holds NaN or infinite values")
-        image = np.clip(image, 0, 255).astype(np.uint8)
-    if image.shape[2] == 1:
-        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-    elif image.shape[2] == 4:
-        image = np.ascontiguousarray(image[..., :3])
-    return np.ascontiguousarray(image)
-
-
-# --------------------------------------------------------------------------------------------
-# Dish
-
-
-def find_dish(image: np.ndarray, radius_range: tuple[float, float] = (0.30, 0.50)) -> Dish:
-    """Find the petri dish: the agar disc inside the wall.
-
-    A Hough circle on a grey image subsampled to ~128 px gives a first guess. Along rays at full
-    resolution the agar's edge is the first place, going outward, where the colour departs from
-    the agar's by more than 18 grey levels (the meniscus or the wall); it is located at half the
-    height of that first peak, with sub-pixel interpolation. A least-squares circle is fitted to
-    the edge points of all rays (+-40 px around the first guess), dropping outliers (labels, pen
-    marks, colonies near the wall) in three rounds.
-
-    Parameters
-    ----------
-    image : ndarray
-        HxWx3 BGR uint8 image (HxW grey is accepted).
-    radius_range : tuple of float
-        Radius searched, as fractions of ``min(height, width)``.
-
-    Returns
-    -------
-    Dish
-
-    Raises
-    ------
-    ValueError
-        If the image is not valid or no dish is found.
-    """
-    img = _as_bgr(image)
-    h, w = img.shape[:2]
-    step = max(1, min(h, w) // 128)
-    small = cv2.resize(img, (w // step, h // step), interpolation=cv2.INTER_NEAREST)
-    small = cv2.GaussianBlur(cv2.cvtColor(small, cv2.COLOR_BGR2GRAY), (5, 5), 1.0)
-    r_min = radius_range[0] * min(h, w) / step
-    r_max = radius_range[1] * min(h, w) / step
-    circles = cv2.HoughCircles(
-        small,
-        cv2.HOUGH_GRADIENT,
-        dp=1,
-        minDist=max(small.shape),
-        param1=60,
-        param2=15,
-        minRadius=int(r_min),
-        maxRadius=math.ceil(r_max),
-    )
-    if circles is None:
-        raise ValueError("no petri dish found in the image; set PlateParams.region to the dish")
-    cx, cy, r = (float(v) * step for v in circles[0, 0])
-    cx, cy, r = _refine_dish(img, cx, cy, r, n_rays=180, reach=40.0, step=1.0)
-    return Dish((cx, cy), r)
-
-
-def _refine_dish(
-    img: np.ndarray, cx: float, cy: float, r: float, n_rays: int, reach: float, step: float
-) -> tuple[float, float, float]:
-    """Refine a dish circle on the agar's edge along rays (see :func:`find_dish`)."""
-    theta = np.linspace(0.0, 2 * np.pi, n_rays, endpoint=False, dtype=np.float32)
-    radii = np.arange(r - reach, r + reach + step / 2, step, dtype=np.float32)
-    map_x = (cx + np.cos(theta)[:, None] * radii[None, :]).astype(np.float32)
-    map_y = (cy + np.sin(theta)[:, None] * radii[None, :]).astype(np.float32)
-    prof = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    prof = prof.astype(np.float32)
-    n_ref = max(round(4.0 / step), 2)
-    ref = prof[:, :n_ref].mean(axis=1)  # agar colour at the inner end of every ray
-    diff = prof - ref[:, None, :]
-    dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
-    rows = np.arange(n_rays)
-    first = np.argmax(dist >= _DISH_EDGE_CONTRAST, axis=1)
-    ok = (dist[rows, first] >= _DISH_EDGE_CONTRAST) & (first > 0)
-    # height of the first peak: the largest distance within 3 px after the first crossing
-    win = first[:, None] + np.arange(round(3.0 / step) + 1)[None, :]
-    peak = dist[rows[:, None], np.minimum(win, dist.shape[1] - 1)].max(axis=1)
-    half = np.maximum(peak / 2.0, _DISH_EDGE_CONTRAST / 2.0)
-    # walk back from the first crossing to the half-height crossing
-    idx = first.copy()
-    for _ in range(round(3.0 / step)):
-        back = ok & (idx > 1) & (dist[rows, idx - 1] >= half)
-        idx = np.where(back, idx - 1, idx)
-    d0, d1 = dist[rows, np.maximum(idx - 1, 0)], dist[rows, idx]
-    frac = np.clip((half - d0) / np.maximum(d1 - d0, 1e-6), 0.0, 1.0)
-    rr = radii[np.maximum(idx - 1, 0)] + frac * step
-    px = (cx + np.cos(theta) * rr)[ok]
-    py = (cy + np.sin(theta) * rr)[ok]
-    if px.size < 12:
-        return cx, cy, r
-    keep = np.ones(px.size, bool)
-    fit = (cx, cy, r)
-    for _ in range(3):
-        fit = _fit_circle(px[keep], py[keep])
-        res = np.abs(np.hypot(px - fit[0], py - fit[1]) - fit[2])
-        mad = np.median(res[keep])
-        new_keep = res <= max(3.0 * 1.4826 * mad, 1.0)
-        if new_keep.sum() < 12:
-            break
-        keep = new_keep
-    return fit
-
-
-def _fit_circle(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
-    """Algebraic (Kasa) least-squares circle through points.
-
-    Minimises the sum of ``(u^2 + v^2 - p u - q v - s)^2`` over the points' offsets ``(u, v)``
-    from their mean (centred, so the normal equations are well conditioned): with the mean
-    removed, ``s`` separates from ``(p, q)``, a 2x2 system solved in closed form.
-    """
-    mx, my = float(x.mean()), float(y.mean())
-    u, v = x - mx, y - my
-    rho = u * u + v * v
-    suu, svv, suv = float(u @ u), float(v @ v), float(u @ v)
-    sur, svr = float(u @ rho), float(v @ rho)
-    det = suu * svv - suv * suv
-    if not det > 0:  # all points on a line: no circle, keep their centre
-        return mx, my, float(math.sqrt(rho.mean()))
-    p = (sur * svv - svr * suv) / det
-    q = (svr * suu - sur * suv) / det
-    s = float(rho.mean())  # the mean of u and v is 0
-    cx, cy = p / 2, q / 2
-    return mx + cx, my + cy, float(math.sqrt(max(s + cx * cx + cy * cy, 0.0)))
 
 
 def _usable_area(
@@ -908,7 +743,7 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     """
     t0 = time.perf_counter()
     params = PlateParams() if params is None else params
-    img = _as_bgr(image)
+    img = as_plate_image(image)
     h, w = img.shape[:2]
     stage_ms: dict[str, float] = {}
     t_stage = t0
@@ -1017,7 +852,7 @@ def _objects_by_segmentation(roi: np.ndarray, usable: np.ndarray, params: PlateP
 
 
 def _objects_by_detector(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> _Objects:
-    """Objects of V1's detector on the dish, the area outside the usable one painted agar."""
+    """Objects of the generic detector on the dish, the area outside the usable one painted agar."""
     agar = np.median(roi[usable > 0], axis=0).astype(np.uint8)
     painted = roi.copy()
     painted[usable == 0] = agar

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
+from labauto.vision import dish as dish_module
 from labauto.vision import plate as plate_module
 from labauto.vision.plate import PlateParams, analyze_plate
 
@@ -161,7 +162,7 @@ def test_unit_weight_deviation_equals_the_weighted_formula(plates: list) -> None
 
 def test_fit_circle_is_exact_on_a_circle_far_from_the_origin() -> None:
     t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
-    cx, cy, r = plate_module._fit_circle(900.25 + 410.5 * np.cos(t), 700.75 + 410.5 * np.sin(t))
+    cx, cy, r = dish_module._fit_circle(900.25 + 410.5 * np.cos(t), 700.75 + 410.5 * np.sin(t))
     assert (cx, cy, r) == pytest.approx((900.25, 700.75, 410.5), abs=1e-9)
 
 

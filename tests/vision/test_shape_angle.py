@@ -68,7 +68,7 @@ def test_rendered_d_alpha_matches_exact_geometry(kind: str, scale: float) -> Non
 
 
 def test_analytic_reference_values() -> None:
-    """The exact-geometry helper reproduces the closed forms quoted in the brief."""
+    """The exact-geometry helper reproduces the closed forms quoted in the issue."""
     median, mean = analytic_d_alpha(shapes.square((0, 0), 10.0, 0.0), spacing=0.001)
     assert mean == pytest.approx(45.0 - np.degrees(np.log(2.0)) / 2.0, abs=1e-3)
     assert median == pytest.approx(np.degrees(np.arctan(0.5)), abs=1e-3)

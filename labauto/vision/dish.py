@@ -1,0 +1,207 @@
+"""The petri dish on a plate image: validating the image and finding the agar disc.
+
+``find_dish`` takes a Hough circle on a subsampled grey image as a first guess and refines it on
+the agar's edge along rays at full resolution (see its docstring); the plate analysis ignores
+everything outside the dish shrunk by a rim margin (wall, labels, pen marks on the rim).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+_DISH_EDGE_CONTRAST = 18.0  # colour distance (grey levels) from the agar that marks its edge
+
+
+@dataclass(frozen=True)
+class Dish:
+    """The dish found (or configured): ``center`` (x, y) and ``radius`` in pixels."""
+
+    center: tuple[float, float]
+    radius: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return ``{"center": [x, y], "radius": r}``."""
+        return {
+            "center": [float(self.center[0]), float(self.center[1])],
+            "radius": float(self.radius),
+        }
+
+
+def as_plate_image(image: Any) -> np.ndarray:
+    """Validate a plate image and return it as a contiguous HxWx3 BGR ``uint8`` array.
+
+    Grey (HxW or HxWx1) is expanded to BGR, BGRA loses its alpha, other real dtypes are clipped
+    to [0, 255].
+
+    Raises
+    ------
+    ValueError
+        Not an array, empty, smaller than 64x64, a wrong number of channels, a non-numeric
+        dtype, or NaN / infinite values; the message names what is wrong.
+    """
+    if not isinstance(image, np.ndarray):
+        raise ValueError(f"image must be a numpy array, got {type(image).__name__}")
+    if image.size == 0:
+        raise ValueError(f"image is empty (shape {image.shape})")
+    if image.ndim == 2:
+        image = image[..., None]
+    if image.ndim != 3 or image.shape[2] not in (1, 3, 4):
+        raise ValueError(f"image must be HxW, HxWx3 (BGR) or HxWx4, got shape {image.shape}")
+    if min(image.shape[:2]) < 64:
+        raise ValueError(f"image must be at least 64x64 pixels, got shape {image.shape}")
+    if image.dtype != np.uint8:
+        if image.dtype.kind not in "uif" or image.dtype == np.bool_:
+            raise ValueError(f"image dtype must be uint8 or a real number type, got {image.dtype}")
+        if image.dtype.kind == "f" and not np.all(np.isfinite(image)):
+            raise ValueError("image holds NaN or infinite values")
+        image = np.clip(image, 0, 255).astype(np.uint8)
+    if image.shape[2] == 1:
+        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    elif image.shape[2] == 4:
+        image = np.ascontiguousarray(image[..., :3])
+    return np.ascontiguousarray(image)
+
+
+def find_dish(image: np.ndarray, radius_range: tuple[float, float] = (0.30, 0.50)) -> Dish:
+    """Find the petri dish: the agar disc inside the wall.
+
+    A Hough circle on a grey image subsampled to ~128 px gives a first guess. Along rays at full
+    resolution the agar's edge is the first place, going outward, where the colour departs from
+    the agar's by more than 18 grey levels (the meniscus or the wall); it is located at half the
+    height of that first peak, with sub-pixel interpolation. A least-squares circle is fitted to
+    the edge points of all rays (+-40 px around the first guess), dropping outliers (labels, pen
+    marks, colonies near the wall) in three rounds.
+
+    Parameters
+    ----------
+    image : ndarray
+        HxWx3 BGR uint8 image (HxW grey is accepted).
+    radius_range : tuple of float
+        Radius searched, as fractions of ``min(height, width)``.
+
+    Returns
+    -------
+    Dish
+
+    Raises
+    ------
+    ValueError
+        If the image is not valid or no dish is found.
+    """
+    img = as_plate_image(image)
+    guess = hough_dish(img, radius_range)
+    if guess is None:
+        raise ValueError("no petri dish found in the image; set PlateParams.region to the dish")
+    cx, cy, r = guess
+    cx, cy, r = _refine_dish(img, cx, cy, r, n_rays=180, reach=40.0, step=1.0)
+    return Dish((cx, cy), r)
+
+
+def hough_dish(
+    image: np.ndarray, radius_range: tuple[float, float] = (0.30, 0.50)
+) -> tuple[float, float, float] | None:
+    """First guess of the dish: the strongest Hough circle on a grey image subsampled to ~128 px.
+
+    Parameters
+    ----------
+    image : ndarray
+        HxWx3 BGR uint8 image.
+    radius_range : tuple of float
+        Radius searched, as fractions of ``min(height, width)``.
+
+    Returns
+    -------
+    tuple of float or None
+        ``(cx, cy, r)`` in full-resolution pixels, or None when no circle is found.
+    """
+    h, w = image.shape[:2]
+    step = max(1, min(h, w) // 128)
+    small = cv2.resize(image, (w // step, h // step), interpolation=cv2.INTER_NEAREST)
+    small = cv2.GaussianBlur(cv2.cvtColor(small, cv2.COLOR_BGR2GRAY), (5, 5), 1.0)
+    circles = cv2.HoughCircles(
+        small,
+        cv2.HOUGH_GRADIENT,
+        dp=1,
+        minDist=max(small.shape),
+        param1=60,
+        param2=15,
+        minRadius=int(radius_range[0] * min(h, w) / step),
+        maxRadius=math.ceil(radius_range[1] * min(h, w) / step),
+    )
+    if circles is None:
+        return None
+    cx, cy, r = (float(v) * step for v in circles[0, 0])
+    return cx, cy, r
+
+
+def _refine_dish(
+    img: np.ndarray, cx: float, cy: float, r: float, n_rays: int, reach: float, step: float
+) -> tuple[float, float, float]:
+    """Refine a dish circle on the agar's edge along rays (see :func:`find_dish`)."""
+    theta = np.linspace(0.0, 2 * np.pi, n_rays, endpoint=False, dtype=np.float32)
+    radii = np.arange(r - reach, r + reach + step / 2, step, dtype=np.float32)
+    map_x = (cx + np.cos(theta)[:, None] * radii[None, :]).astype(np.float32)
+    map_y = (cy + np.sin(theta)[:, None] * radii[None, :]).astype(np.float32)
+    prof = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    prof = prof.astype(np.float32)
+    n_ref = max(round(4.0 / step), 2)
+    ref = prof[:, :n_ref].mean(axis=1)  # agar colour at the inner end of every ray
+    diff = prof - ref[:, None, :]
+    dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
+    rows = np.arange(n_rays)
+    first = np.argmax(dist >= _DISH_EDGE_CONTRAST, axis=1)
+    ok = (dist[rows, first] >= _DISH_EDGE_CONTRAST) & (first > 0)
+    # height of the first peak: the largest distance within 3 px after the first crossing
+    win = first[:, None] + np.arange(round(3.0 / step) + 1)[None, :]
+    peak = dist[rows[:, None], np.minimum(win, dist.shape[1] - 1)].max(axis=1)
+    half = np.maximum(peak / 2.0, _DISH_EDGE_CONTRAST / 2.0)
+    # walk back from the first crossing to the half-height crossing
+    idx = first.copy()
+    for _ in range(round(3.0 / step)):
+        back = ok & (idx > 1) & (dist[rows, idx - 1] >= half)
+        idx = np.where(back, idx - 1, idx)
+    d0, d1 = dist[rows, np.maximum(idx - 1, 0)], dist[rows, idx]
+    frac = np.clip((half - d0) / np.maximum(d1 - d0, 1e-6), 0.0, 1.0)
+    rr = radii[np.maximum(idx - 1, 0)] + frac * step
+    px = (cx + np.cos(theta) * rr)[ok]
+    py = (cy + np.sin(theta) * rr)[ok]
+    if px.size < 12:
+        return cx, cy, r
+    keep = np.ones(px.size, bool)
+    fit = (cx, cy, r)
+    for _ in range(3):
+        fit = _fit_circle(px[keep], py[keep])
+        res = np.abs(np.hypot(px - fit[0], py - fit[1]) - fit[2])
+        mad = np.median(res[keep])
+        new_keep = res <= max(3.0 * 1.4826 * mad, 1.0)
+        if new_keep.sum() < 12:
+            break
+        keep = new_keep
+    return fit
+
+
+def _fit_circle(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+    """Algebraic (Kasa) least-squares circle through points.
+
+    Minimises the sum of ``(u^2 + v^2 - p u - q v - s)^2`` over the points' offsets ``(u, v)``
+    from their mean (centred, so the normal equations are well conditioned): with the mean
+    removed, ``s`` separates from ``(p, q)``, a 2x2 system solved in closed form.
+    """
+    mx, my = float(x.mean()), float(y.mean())
+    u, v = x - mx, y - my
+    rho = u * u + v * v
+    suu, svv, suv = float(u @ u), float(v @ v), float(u @ v)
+    sur, svr = float(u @ rho), float(v @ rho)
+    det = suu * svv - suv * suv
+    if not det > 0:  # all points on a line: no circle, keep their centre
+        return mx, my, float(math.sqrt(rho.mean()))
+    p = (sur * svv - svr * suv) / det
+    q = (svr * suu - sur * suv) / det
+    s = float(rho.mean())  # the mean of u and v is 0
+    cx, cy = p / 2, q / 2
+    return mx + cx, my + cy, float(math.sqrt(max(s + cx * cx + cy * cy, 0.0)))
