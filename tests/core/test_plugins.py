@@ -14,13 +14,11 @@ import sys
 import numpy as np
 import pytest
 
+# installed by the test setup (`make install`); a missing install must fail, not skip
+import labauto_sample_plugin
 from labauto import hookspecs
 from labauto.plugin_manager import load_plugins
 from labauto.synthetic.shapes import ellipse, render
-
-labauto_sample_plugin = pytest.importorskip(
-    "labauto_sample_plugin", reason="install tests/sample_plugin (make install)"
-)
 
 
 @pytest.fixture(scope="module")

@@ -209,7 +209,8 @@ def test_a_finished_run_cannot_be_resumed_or_controlled(make_config):
 
 
 def test_event_hooks_reach_an_installed_exporter(make_config):
-    sample = pytest.importorskip("labauto_sample_plugin")
+    import labauto_sample_plugin as sample  # installed by the test setup (make install)
+
     before = len(sample.EVENTS)
     _, outcome, _ = run(make_config(picking={"max_picks": 2}))
     names = [name for name, kwargs in sample.EVENTS[before:] if kwargs["run_id"] == outcome.run_id]

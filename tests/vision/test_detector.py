@@ -78,7 +78,6 @@ ELLIPSES = [  # (a, b, angle): radius of curvature b^2/a >= 6 px (see the report
 
 @pytest.mark.parametrize(("a", "b", "angle"), ELLIPSES)
 def test_ellipse_fit_through_the_whole_chain(a: float, b: float, angle: float) -> None:
-    pytest.importorskip("labauto.vision.ellipse_fit")
     size = int(2 * a + 24)
     center = (size / 2 + 0.41, size / 2 - 0.27)
     img = render_alone(shapes.ellipse(center, (a, b), angle), size, background=60, color=190)
