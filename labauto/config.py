@@ -202,7 +202,7 @@ def _describe(error: dict[str, Any]) -> str:
     kind = error["type"]
     got = error.get("input")
     ctx = error.get("ctx") or {}
-    if kind == "extra_forbidden":
+    if kind in ("extra_forbidden", "unexpected_keyword_argument"):
         return "unknown key"
     if kind == "missing":
         return "missing required key"
@@ -229,13 +229,34 @@ def _describe(error: dict[str, Any]) -> str:
     return message
 
 
+def _is_type_tag(part: Any) -> bool:
+    """True for the loc parts pydantic adds to name a union member, e.g. ``tuple[float, ...]``."""
+    return isinstance(part, str) and ("[" in part or part[:1].isupper())
+
+
 def _format(source: str, exc: ValidationError, prefix: str = "") -> str:
-    lines = []
+    """One line per problem: ``source: dotted.key: what was expected, got what``.
+
+    Errors under a union (a key that takes one of several forms) are folded into one line per
+    key that names the forms allowed.
+    """
+    lines: list[str] = []
+    unions: dict[str, list[str]] = {}
     for error in exc.errors():
-        path = ".".join(str(part) for part in (prefix, *error["loc"]) if part != "")
+        loc = [part for part in (prefix, *error["loc"]) if part != ""]
+        tags = [i for i, part in enumerate(loc) if _is_type_tag(part)]
+        if tags:
+            path = ".".join(str(part) for part in loc[: tags[0]])
+            form = str(loc[tags[0]])
+            if form not in unions.setdefault(path, []):
+                unions[path].append(form)
+            continue
+        path = ".".join(str(part) for part in loc)
         lines.append(
             f"{source}: {path}: {_describe(error)}" if path else f"{source}: {_describe(error)}"
         )
+    for path, forms in unions.items():
+        lines.append(f"{source}: {path}: expected one of: {'; '.join(forms)}")
     return "\n".join(lines)
 
 
@@ -312,7 +333,8 @@ def section_model(section: str) -> type[BaseModel]:
     return create_model(f"{class_name}Section", __base__=Section, **fields)
 
 
-def _section_params(config: Config, section: str) -> Any:
+def section_params(config: Config, section: str) -> Any:
+    """The dataclass (e.g. ``DetectorParams``) of a config's dataclass section."""
     module_name, class_name = DATACLASS_SECTIONS[section]
     cls = getattr(importlib.import_module(module_name), class_name)
     validated = section_model(section).model_validate(getattr(config, section))
@@ -321,12 +343,12 @@ def _section_params(config: Config, section: str) -> Any:
 
 def detector_params(config: Config) -> Any:
     """The ``DetectorParams`` of a config's ``detector`` section."""
-    return _section_params(config, "detector")
+    return section_params(config, "detector")
 
 
 def plate_params(config: Config) -> Any:
     """The ``PlateParams`` of a config's ``plate`` section."""
-    return _section_params(config, "plate")
+    return section_params(config, "plate")
 
 
 def parse_config(
@@ -351,11 +373,14 @@ def parse_config(
         config = Config.model_validate(data)
     except ValidationError as exc:
         raise ConfigError(_format(source, exc)) from None
-    for section in DATACLASS_SECTIONS:
+    for section, (_module, class_name) in DATACLASS_SECTIONS.items():
         try:
-            section_model(section).model_validate(getattr(config, section))
+            section_params(config, section)
         except ValidationError as exc:
             raise ConfigError(_format(source, exc, prefix=section)) from None
+        except (ValueError, TypeError) as exc:  # the dataclass's own checks
+            message = str(exc).replace(f"{class_name}.", f"{section}.")
+            raise ConfigError(f"{source}: {message}") from None
     return config
 
 

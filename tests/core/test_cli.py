@@ -10,6 +10,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+import yaml
 
 from labauto import __version__
 from labauto.cli.main import main
@@ -193,3 +194,16 @@ def test_devices_check_fails_when_a_device_does_not_answer(tmp_path, capsys):
     captured = capsys.readouterr()
     assert "robot: NO ANSWER" in captured.out and "analyzer: ok" in captured.out
     assert "labauto: error: robot did not answer" in captured.err
+
+
+def test_config_show_prints_every_default_and_reads_back_the_same(tmp_path, capsys):
+    assert main(["config", "show"]) == 0
+    full = capsys.readouterr().out
+    document = yaml.safe_load(full)
+    assert document["detector"]["des_threshold_deg"] > 0
+    assert document["plate"]["detector"]["method"] == "color"
+    assert document["robot"]["simulate"] is True
+    path = tmp_path / "full.yaml"
+    path.write_text(full)
+    assert main(["config", "show", "--config", str(path)]) == 0
+    assert capsys.readouterr().out == full
