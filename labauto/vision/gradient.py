@@ -116,10 +116,11 @@ def color_gradient(image: np.ndarray, blur_sigma: float = 0.7) -> tuple[np.ndarr
         return gx, gy
     channels = cv2.split(blurred)
     gx, gy, best = _channel_gradient(channels[0])
-    for channel in channels[1:]:
+    for i, channel in enumerate(channels[1:], start=2):
         dx, dy, strength = _channel_gradient(channel)
         stronger = cv2.compare(strength, best, cv2.CMP_GT)  # ties keep the earlier channel
         cv2.copyTo(dx, stronger, gx)
         cv2.copyTo(dy, stronger, gy)
-        cv2.max(best, strength, best)
+        if i < len(channels):  # the last channel's maximum is not needed
+            cv2.max(best, strength, best)
     return gx, gy

@@ -1,0 +1,55 @@
+"""thin_edges: the incremental passes (only pixels next to a removal are decided again) give
+the same map as deciding every edge pixel in every pass."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from labauto.vision.edges import _NEIGHBOURS, _REMOVABLE, _nonzero_sparse, thin_edges
+
+
+def _thin_reference(edges: np.ndarray, max_iter: int = 2) -> np.ndarray:
+    """Every edge pixel of a checkerboard class decided in every pass (no shortcuts)."""
+    padded = np.pad((edges != 0).astype(np.uint8), 1)
+    stride = padded.shape[1]
+    ys, xs = np.nonzero(padded)
+    linear = ys * stride + xs  # classes by parity of the row and of the linear index
+    for _ in range(max_iter):
+        changed = False
+        for cls in range(4):
+            sel = ((ys % 2) * 2 + (linear % 2)) == cls
+            y, x = ys[sel], xs[sel]
+            code = np.zeros(y.shape[0], np.uint8)
+            for bit, (dy, dx) in enumerate(_NEIGHBOURS):
+                code |= padded[y + dy, x + dx] << bit
+            remove = _REMOVABLE[code] & (padded[y, x] != 0)
+            if remove.any():
+                changed = True
+                padded[y[remove], x[remove]] = 0
+        if not changed:
+            break
+    return padded
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("max_iter", [1, 2, 3])
+def test_thin_edges_matches_full_passes(seed: int, max_iter: int) -> None:
+    rng = np.random.default_rng(seed)
+    h, w = rng.integers(20, 70, size=2)
+    edges = np.zeros((h, w), np.uint8)
+    for _ in range(8):  # thick strokes and blobs leave much to thin over several passes
+        centre = tuple(int(v) for v in rng.integers(0, (w, h)))
+        axes = tuple(int(v) for v in rng.integers(2, 15, size=2))
+        cv2.ellipse(edges, centre, axes, float(rng.uniform(0, 180)), 0, 360, 255, 2)
+    edges[rng.random((h, w)) < 0.05] = 255
+    np.testing.assert_array_equal(thin_edges(edges, max_iter), _thin_reference(edges, max_iter))
+
+
+@pytest.mark.parametrize("size", [1, 7, 8, 9, 64, 1283])
+def test_nonzero_sparse_matches_flatnonzero(size: int) -> None:
+    rng = np.random.default_rng(size)
+    flat = (rng.random(size) < 0.1).astype(np.uint8) * rng.integers(1, 256, size, dtype=np.uint8)
+    flat[-1] = 1  # a nonzero byte in the tail that is no whole 8-byte word
+    np.testing.assert_array_equal(_nonzero_sparse(flat), np.flatnonzero(flat))
