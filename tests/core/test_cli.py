@@ -207,3 +207,16 @@ def test_config_show_prints_every_default_and_reads_back_the_same(tmp_path, caps
     path.write_text(full)
     assert main(["config", "show", "--config", str(path)]) == 0
     assert capsys.readouterr().out == full
+
+
+def test_faults_from_the_config_reach_the_simulated_devices(tmp_path, capsys):
+    config = tmp_path / "faulty.yaml"
+    config.write_text(
+        "robot:\n  timeout_s: 0.3\n  simulator:\n    faults: [{kind: no_reply, count: 5}]\n"
+        "analyzer:\n  simulator:\n    faults: {busy: null}\n"
+    )
+    assert main(["devices", "check", "--config", str(config), "--json"]) == 1
+    report = json.loads(capsys.readouterr().out)
+    assert not report["robot"]["ok"] and "DeviceTimeout" in report["robot"]["detail"]
+    assert report["analyzer"]["ok"]  # it answers, and says it is busy
+    assert report["analyzer"]["detail"]["state"] == "busy"
