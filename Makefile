@@ -3,9 +3,9 @@ PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
 
-$(STAMP): pyproject.toml tests/sample_plugin/pyproject.toml
+$(STAMP): pyproject.toml tests/sample_plugin/pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
-	$(VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(VENV)/bin/python -m pip install --quiet --upgrade pip 'setuptools>=77' wheel
 	$(VENV)/bin/python -m pip install --quiet -e '.[test]' ./tests/sample_plugin
 	touch $(STAMP)
 

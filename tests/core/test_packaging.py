@@ -1,4 +1,8 @@
-"""A regular (non-editable) install carries everything labauto needs at run time."""
+"""A regular (non-editable) install carries everything labauto needs at run time.
+
+The wheel is built without build isolation (setuptools comes from the test environment, see the
+Makefile), so the test needs no network.
+"""
 
 from __future__ import annotations
 
