@@ -226,6 +226,14 @@ class ColonyPickingRun:
             self._cleanup()
         except EmergencyStop:
             final, error = RunState.STOPPED, "emergency stop"
+            if self.control.estop_error is not None:  # the soft reset itself failed
+                failure = self.control.estop_error
+                error = f"emergency stop; robot soft reset failed: {failure}"
+                self.event(
+                    "run.estop",
+                    f"robot soft reset failed: {failure}: check the robot",
+                    source="robot",
+                )
             self._flag_unknown_picks()
         except Exception as exc:
             final, error = RunState.FAILED, f"{type(exc).__name__}: {exc}"

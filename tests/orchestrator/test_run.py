@@ -230,3 +230,21 @@ def test_unknown_driver_is_a_clear_error_and_leaves_no_run(make_config):
     ):
         pass
     assert store.list_runs() == []
+
+
+def test_a_failed_soft_reset_during_an_estop_is_reported(make_config):
+    recorder = Recorder()
+    config = make_config()
+    store = Store.open(config.database.url)
+    with open_run(config, store, reporter=recorder) as session:
+
+        def unplugged():
+            raise ConnectionError("robot port gone")
+
+        session.control.on_estop = unplugged
+        recorder.when(lambda kind, _: kind == "pick.done", session.control.estop)
+        outcome = session.execute()
+    assert outcome.state == "stopped"
+    assert outcome.error == "emergency stop; robot soft reset failed: robot port gone"
+    events = store.events(outcome.run_id, "run.estop")
+    assert any("soft reset failed" in e.message for e in events)
