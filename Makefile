@@ -2,8 +2,9 @@
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
+KERNELS := $(wildcard labauto/vision/kernels/*.pyx)
 
-$(STAMP): pyproject.toml tests/sample_plugin/pyproject.toml Makefile
+$(STAMP): pyproject.toml setup.py $(KERNELS) tests/sample_plugin/pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/python -m pip install --quiet --upgrade pip 'setuptools>=77' wheel
 	$(VENV)/bin/python -m pip install --quiet -e '.[test]' ./tests/sample_plugin

@@ -9,15 +9,19 @@ common edge between two uniform colours, where all channel gradients are paralle
 equals the structure tensor's principal direction. Its magnitude is the largest channel's, which
 is within a factor sqrt(3) of the eq. 2 magnitude; thresholds are given on this scale.
 
-Derivatives are the 3x3 Sobel operator (``cv2.spatialGradient``) after an optional Gaussian blur
-(one ``cv2.GaussianBlur`` call on all channels), computed channel by channel on 8-bit data, so the
-result is int16 and can go straight into ``cv2.Canny(dx, dy, ...)``.
+Derivatives are the 3x3 Sobel operator after an optional Gaussian blur (one ``cv2.GaussianBlur``
+call on all channels), in integer arithmetic on 8-bit data, so the result is int16 and can go
+straight into ``cv2.Canny(dx, dy, ...)``. For a colour image the three channel gradients and the
+choice among them are one compiled pass (:mod:`labauto.vision.kernels.gradient`); each channel's
+derivatives equal ``cv2.spatialGradient``'s.
 """
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
+
+from labauto.vision.kernels.gradient import max_channel_sobel
 
 
 def as_uint8_image(image: object, name: str = "image") -> np.ndarray:
@@ -84,13 +88,6 @@ def _blur(image: np.ndarray, blur_sigma: float) -> np.ndarray:
     return cv2.GaussianBlur(image, (ksize, ksize), blur_sigma)  # all channels in one call
 
 
-def _channel_gradient(channel: np.ndarray) -> tuple[np.ndarray, ...]:
-    dx, dy = cv2.spatialGradient(channel)
-    strength = np.abs(dx)
-    strength += np.abs(dy)  # L1 magnitude (at most 2 * 4 * 255: no overflow in int16)
-    return dx, dy, strength
-
-
 def color_gradient(image: np.ndarray, blur_sigma: float = 0.7) -> tuple[np.ndarray, np.ndarray]:
     """Per-pixel colour gradient: 3x3 Sobel of the channel with the largest gradient.
 
@@ -106,21 +103,16 @@ def color_gradient(image: np.ndarray, blur_sigma: float = 0.7) -> tuple[np.ndarr
     -------
     gx, gy : np.ndarray
         int16 HxW derivatives along x (right) and y (down), on the scale of the 3x3 Sobel
-        operator (a step of contrast C gives a peak of about 4 C before blurring).
+        operator (a step of contrast C gives a peak of about 4 C before blurring). At the image
+        border the image is mirrored without repeating the edge pixel (as ``cv2.spatialGradient``
+        does), so the derivative across the border is 0.
     """
     if image.dtype != np.uint8 or image.ndim not in (2, 3):
         raise ValueError(f"color_gradient needs a uint8 HxW or HxWx3 image, got {image.dtype}")
     blurred = _blur(image, blur_sigma)
     if image.ndim == 2:
-        gx, gy, _ = _channel_gradient(blurred)
-        return gx, gy
-    channels = cv2.split(blurred)
-    gx, gy, best = _channel_gradient(channels[0])
-    for i, channel in enumerate(channels[1:], start=2):
-        dx, dy, strength = _channel_gradient(channel)
-        stronger = cv2.compare(strength, best, cv2.CMP_GT)  # ties keep the earlier channel
-        cv2.copyTo(dx, stronger, gx)
-        cv2.copyTo(dy, stronger, gy)
-        if i < len(channels):  # the last channel's maximum is not needed
-            cv2.max(best, strength, best)
+        return cv2.spatialGradient(blurred)
+    gx = np.empty(image.shape[:2], np.int16)
+    gy = np.empty(image.shape[:2], np.int16)
+    max_channel_sobel(blurred, gx, gy)  # one pass over the three channels, rows in parallel
     return gx, gy
