@@ -17,9 +17,9 @@ gives axes, both semi-axes are within 10 % (+0.5 px). For matched ellipses the m
 and the mean semi-axis error (px) are shown too.
 
 A second table splits the default ``detect`` (labels + fit) into its stages (median ms per image):
-colour gradient (eq. 2), Canny hysteresis, edge thinning, boundary tracing, ordered chains,
-sub-pixel refinement, shape angle D_alpha (eq. 3), shape labels (harmonics), ellipse fits, and
-the rest (validation, building the objects).
+colour gradient (eq. 2), Canny hysteresis, edge linking with sub-pixel refinement (one kernel
+pass: thinning, tracing, ordered chains, gradients), shape angle D_alpha (eq. 3), shape labels
+(harmonics), ellipse fits, and the rest (validation, building the objects).
 Run: ``python benchmarks/bench_detect.py``.
 """
 
@@ -35,7 +35,7 @@ import numpy as np
 
 from labauto.synthetic.shapes import make_scene
 from labauto.vision import detector, edges
-from labauto.vision.contours import Contours, ends_adjacent
+from labauto.vision.contours import Contours
 from labauto.vision.detector import DetectorParams
 from labauto.vision.detector import detect as vision_detect
 from labauto.vision.gradient import as_uint8_image, color_gradient
@@ -134,10 +134,7 @@ def score(found: list[Detection], truth: list[dict]) -> tuple[int, int, int, lis
 STAGES = (
     "gradient (eq. 2)",
     "canny hysteresis",
-    "thin edges",
-    "trace (findContours)",
-    "ordered chains",
-    "sub-pixel",
+    "edge linking + sub-pixel",
     "shape angle (eq. 3)",
     "shape labels",
     "ellipse fits",
@@ -153,23 +150,10 @@ def stage_times(image: np.ndarray, params: DetectorParams) -> list[float]:
     t.append(time.perf_counter())
     edge_map = edges.canny_edges(gx, gy, params.canny_low, params.canny_high)
     t.append(time.perf_counter())
-    thin = edges.thin_edges(edge_map)
-    t.append(time.perf_counter())
-    traces, hierarchy = cv2.findContours(
-        thin, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE, offset=(-1, -1)
+    points, offsets, grads, closed = edges.edge_contours(
+        edge_map, gx, gy, params.min_contour_length, params.max_contour_length, params.subpixel
     )
-    t.append(time.perf_counter())
-    outer = hierarchy[0, :, 3] < 0
-    keep = [
-        c for c, o in zip(traces, outer, strict=True) if o and len(c) >= params.min_contour_length
-    ]
-    pix, offsets = edges.traces_to_chains(
-        keep, img.shape[1], params.min_contour_length, params.max_contour_length
-    )
-    t.append(time.perf_counter())
-    grads = edges.gradient_at(gx, gy, pix)
-    points = edges.refine_subpixel(pix, gx, gy)
-    contours = Contours(points, offsets, grads, ends_adjacent(pix, offsets))
+    contours = Contours(points, offsets, grads, closed)
     t.append(time.perf_counter())
     angles = shape_angles(contours.points, contours.gradients, contours.offsets, contours.closed)
     des = angles.is_des(params.des_threshold_deg, params.statistic, params.max_gap_fraction)

@@ -23,13 +23,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from labauto.vision.edges import (
-    canny_edges,
-    gradient_at,
-    link_edges,
-    refine_subpixel,
-    traces_to_chains,
-)
+from labauto.vision.edges import canny_edges, edge_contours, traces_to_chains
 from labauto.vision.gradient import color_gradient
 from labauto.vision.segmentation import segment
 
@@ -133,12 +127,12 @@ def canny_contours(
     """
     gx, gy = color_gradient(image, blur_sigma)
     edges = canny_edges(gx, gy, low, high)
-    pix, offsets = link_edges(edges, min_length, max_length)
-    if pix.shape[0] == 0:
+    # linking, gradient lookup and sub-pixel refinement: one kernel pass (edges.edge_contours);
+    # ``closed`` is ends_adjacent of the pixel chains
+    points, offsets, grads, closed = edge_contours(edges, gx, gy, min_length, max_length, subpixel)
+    if points.shape[0] == 0:
         return Contours.empty()
-    grads = gradient_at(gx, gy, pix)
-    points = refine_subpixel(pix, gx, gy) if subpixel else pix.astype(np.float64)
-    return Contours(points, offsets, grads, ends_adjacent(pix, offsets))
+    return Contours(points, offsets, grads, closed)
 
 
 def _sobel_at(field: np.ndarray, points: np.ndarray) -> np.ndarray:

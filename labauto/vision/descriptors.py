@@ -14,8 +14,8 @@ Choices where the paper is vague (each is a documented decision, not an accident
   dropped.
 * **Centre of gravity.** The area centroid of the polygon (the centroid of the filled shape,
   exact for any polygon and independent of how densely each part is sampled). A polygon with
-  (nearly) no area, such as a line traced forth and back, uses the length-weighted centroid of
-  its segments instead.
+  (nearly) no area (compactness ``4 pi area / perimeter^2`` at most 1e-9), such as a line traced
+  forth and back, uses the length-weighted centroid of its segments instead.
 * **Semi-axes a >= b.** The paper approximates them "by the shortest and longest distance of two
   points to the center of gravity". Extreme distances depend on one or two noisy points, so the
   default (``axes="moments"``) takes them from the second moments of the filled polygon: a and b
@@ -48,6 +48,14 @@ Choices where the paper is vague (each is a documented decision, not an accident
   curvature and are left out. Ec has units px^-2 like the paper's; ``bending_energy_normalised``
   multiplies by ``(P / 2 pi)^2`` so it is 1 for a circle, scale-free and >= 1 for any closed
   curve.
+
+Implementation: the per-contour loops (dropping repeated points, area and centroid, second
+moments, perimeters, the convex hull by Andrew's monotone chain and the minimum-area box by
+rotating calipers over it, all in float64) are one compiled kernel,
+:func:`labauto.vision.kernels.shape.measure_contours`, which takes any number of contours in one
+call; :func:`shape_descriptors` is a batch of one and :func:`shape_descriptors_batch` the batch
+the detector uses. The same call also computes the polar series of
+:mod:`labauto.vision.harmonics`.
 """
 
 from __future__ import annotations
@@ -55,12 +63,11 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
-import cv2
 import numpy as np
 
+from labauto.vision.kernels import shape as _kernel
+
 _AXES_METHODS = ("moments", "extent")
-#: Compactness below which a polygon is treated as having no area (a traced line).
-_NO_AREA_COMPACTNESS = 1e-9
 
 
 @dataclass(frozen=True)
@@ -186,28 +193,18 @@ def shape_descriptors(
         curvature_sigma >= 0.0 and math.isfinite(curvature_sigma)
     ):
         raise ValueError(f"curvature_sigma must be a finite number >= 0, got {curvature_sigma!r}")
+    measured = measure_contours(pts, np.array([0, len(pts)], np.int64))
+    raise_for_status(int(measured.status[0]), "points")
+    v = {name: float(column[0]) for name, column in measured.values.items()}
     pts = drop_repeated_points(pts, closed=True)
-    if len(pts) < 2:
-        raise ValueError("points: all points are identical; a shape needs at least 2 distinct")
-
-    seg_len = np.hypot(*np.diff(pts, axis=0, append=pts[:1]).T)
-    perimeter = float(seg_len.sum() if closed else seg_len[:-1].sum())
-    area, centroid = polygon_area_centroid(pts)
-    has_area = 4.0 * math.pi * area > _NO_AREA_COMPACTNESS * float(seg_len.sum()) ** 2
-    if not has_area:
-        area = 0.0
-        centroid = _curve_centroid(pts, seg_len)
-
+    centroid = (v["centroid_x"], v["centroid_y"])
     if axes == "moments":
-        a, b = _moment_axes(pts, centroid, seg_len, has_area)
+        a, b = v["semi_major"], v["semi_minor"]
     else:
-        a, b = _extent_axes(pts, centroid)
-
-    hull = convex_hull(pts)
-    hull_len = np.hypot(*np.diff(hull, axis=0, append=hull[:1]).T)
-    convex_perimeter = float(hull_len.sum())
-    box_long, box_short = min_area_box(hull)
-    box_area = box_long * box_short if box_short > 1e-12 * box_long else 0.0
+        a, b = _extent_axes(pts, np.array(centroid))
+    area, perimeter, convex_perimeter = v["area"], v["perimeter"], v["convex_perimeter"]
+    if not closed:
+        perimeter -= v["closing"]
 
     e = math.sqrt(max(a * a - b * b, 0.0))
     if curvature_sigma is None:
@@ -221,15 +218,15 @@ def shape_descriptors(
         numerical_eccentricity=e / a if a > 0 else 0.0,
         compactness=4.0 * math.pi * area / perimeter**2,
         roundness=4.0 * math.pi * area / convex_perimeter**2,
-        elongation=box_long / box_short if box_short > 1e-12 * box_long else math.inf,
+        elongation=v["elongation"],
         bending_energy=bending_energy(pts, closed=closed, sigma=sigma),
         semi_major=a,
         semi_minor=b,
         area=area,
         perimeter=perimeter,
         convex_perimeter=convex_perimeter,
-        rectangularity=min(area / box_area, 1.0) if box_area > 0 else 0.0,
-        centroid=(float(centroid[0]), float(centroid[1])),
+        rectangularity=v["rectangularity"],
+        centroid=centroid,
     )
 
 
@@ -257,12 +254,8 @@ def as_contour(points: np.ndarray, *, min_points: int, name: str = "points") -> 
 
 def drop_repeated_points(points: np.ndarray, *, closed: bool) -> np.ndarray:
     """Drop points equal to their predecessor (if closed, also a last point equal to the first)."""
-    keep = np.ones(len(points), dtype=bool)
-    keep[1:] = np.any(points[1:] != points[:-1], axis=1)
-    pts = points[keep]
-    if closed and len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
-        pts = pts[:-1]
-    return pts
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    return _kernel.drop_repeated(pts, np.array([0, len(pts)], np.int64), closed)[0]
 
 
 def polygon_area_centroid(points: np.ndarray) -> tuple[float, np.ndarray]:
@@ -271,38 +264,26 @@ def polygon_area_centroid(points: np.ndarray) -> tuple[float, np.ndarray]:
     Computed about the vertex mean for precision. When the area is zero the centroid is the
     vertex mean.
     """
-    origin = points.mean(axis=0)
-    p = points - origin
-    q = np.roll(p, -1, axis=0)
-    cross = p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]
-    signed_area = 0.5 * cross.sum()
-    if signed_area == 0.0:
-        return 0.0, origin
-    cx = ((p[:, 0] + q[:, 0]) * cross).sum() / (6.0 * signed_area)
-    cy = ((p[:, 1] + q[:, 1]) * cross).sum() / (6.0 * signed_area)
-    return abs(float(signed_area)), origin + np.array([cx, cy])
+    area, centroid = polygon_area_centroid_batch(points, np.array([0, len(points)], np.int64))
+    return float(area[0]), centroid[0]
 
 
 def convex_hull(points: np.ndarray) -> np.ndarray:
     """Vertices of the convex hull (float64, in order) of ``points``.
 
-    Uses ``cv2.convexHull`` on coordinates centred at their mean (float32 is all OpenCV takes),
-    returning the original float64 vertices.
+    Andrew's monotone chain in float64, counter-clockwise in (x, y) axes (clockwise as seen in
+    an image, y down), without collinear vertices: collinear points give their two ends.
     """
-    centred = (points - points.mean(axis=0)).astype(np.float32)
-    idx = cv2.convexHull(centred, returnPoints=False).ravel()
-    return points[np.sort(idx)] if len(idx) < 3 else points[idx]
+    return _kernel.convex_hull(np.ascontiguousarray(points, dtype=np.float64))
 
 
 def min_area_box(points: np.ndarray) -> tuple[float, float]:
     """Long and short side of the minimum-area rotated rectangle around ``points``.
 
-    ``cv2.minAreaRect`` (rotating calipers) on coordinates centred at their mean. Returns
-    ``(0, 0)`` for a single point and ``(L, 0)`` for collinear points.
+    Rotating calipers over the convex hull (one side of the box on each hull edge in turn), in
+    float64. Returns ``(0, 0)`` for a single point and ``(L, 0)`` for collinear points.
     """
-    centred = (points - points.mean(axis=0)).astype(np.float32)
-    _, (w, h), _ = cv2.minAreaRect(centred)
-    return float(max(w, h)), float(min(w, h))
+    return _kernel.min_area_box(np.ascontiguousarray(points, dtype=np.float64))
 
 
 def bending_energy(points: np.ndarray, *, closed: bool = True, sigma: float = 0.0) -> float:
@@ -351,53 +332,6 @@ def _smooth_along(points: np.ndarray, sigma: float, *, closed: bool) -> np.ndarr
     return np.column_stack([np.convolve(padded[:, i], kernel, mode="valid") for i in range(2)])
 
 
-def _curve_centroid(points: np.ndarray, seg_len: np.ndarray) -> np.ndarray:
-    """Centroid of the closed polyline with uniform mass per length."""
-    mid = 0.5 * (points + np.roll(points, -1, axis=0))
-    return (mid * seg_len[:, None]).sum(axis=0) / seg_len.sum()
-
-
-def _moment_axes(
-    points: np.ndarray, centroid: np.ndarray, seg_len: np.ndarray, has_area: bool
-) -> tuple[float, float]:
-    """Semi-axes of the ellipse with the same second moments (area, or curve without area)."""
-    p = points - centroid
-    q = np.roll(p, -1, axis=0)
-    if has_area:
-        cross = p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]
-        area2 = cross.sum()  # twice the signed area
-        sxx = (cross * (p[:, 0] ** 2 + p[:, 0] * q[:, 0] + q[:, 0] ** 2)).sum() / (6.0 * area2)
-        syy = (cross * (p[:, 1] ** 2 + p[:, 1] * q[:, 1] + q[:, 1] ** 2)).sum() / (6.0 * area2)
-        sxy = (
-            cross
-            * (
-                2 * p[:, 0] * p[:, 1]
-                + p[:, 0] * q[:, 1]
-                + q[:, 0] * p[:, 1]
-                + 2 * q[:, 0] * q[:, 1]
-            )
-        ).sum() / (12.0 * area2)
-        scale = 4.0  # filled ellipse: variance along an axis = semi-axis^2 / 4
-    else:
-        w = seg_len / seg_len.sum()
-        sxx = (w * (p[:, 0] ** 2 + p[:, 0] * q[:, 0] + q[:, 0] ** 2)).sum() / 3.0
-        syy = (w * (p[:, 1] ** 2 + p[:, 1] * q[:, 1] + q[:, 1] ** 2)).sum() / 3.0
-        sxy = (
-            w
-            * (
-                2 * p[:, 0] * p[:, 1]
-                + p[:, 0] * q[:, 1]
-                + q[:, 0] * p[:, 1]
-                + 2 * q[:, 0] * q[:, 1]
-            )
-        ).sum() / 6.0
-        scale = 3.0  # uniform segment of length L: variance L^2 / 12, semi-axis L / 2
-    half_trace = 0.5 * (sxx + syy)
-    root = math.hypot(0.5 * (sxx - syy), sxy)
-    l1, l2 = half_trace + root, max(half_trace - root, 0.0)
-    return math.sqrt(scale * l1), math.sqrt(scale * l2)
-
-
 def _extent_axes(points: np.ndarray, centroid: np.ndarray) -> tuple[float, float]:
     """The paper's rule: farthest vertex and nearest edge point from the centroid."""
     p = points - centroid
@@ -426,8 +360,9 @@ class DescriptorArrays:
     Attributes
     ----------
     valid : np.ndarray
-        (K,) bool; False where :func:`shape_descriptors` would raise (fewer than 3 points or
-        fewer than 2 distinct ones). The other arrays hold NaN there.
+        (K,) bool; False where :func:`shape_descriptors` would raise (fewer than 3 points,
+        a non-finite one, fewer than 2 distinct ones, or a self-intersecting polygon with a
+        negative second moment). The other arrays hold NaN there.
     area : np.ndarray
         (K,) absolute polygon area (closed by the chord), 0 for a polygon without area.
     centroid : np.ndarray
@@ -449,6 +384,107 @@ class DescriptorArrays:
     rectangularity: np.ndarray
 
 
+@dataclass(frozen=True)
+class MeasuredContours:
+    """Raw output of the shape kernel for K contours (:func:`measure_contours`).
+
+    Attributes
+    ----------
+    status : np.ndarray
+        (K,) int8 descriptor status, ``labauto.vision.kernels.shape.OK`` where the descriptors
+        exist (see :func:`raise_for_status` for the others).
+    series_status : np.ndarray
+        (K,) int8, ``SERIES_OK`` where the polar series was computed.
+    values : dict of str to np.ndarray
+        (K,) arrays named as ``labauto.vision.kernels.shape.VALUE_NAMES``: area, centroid_x/y,
+        semi_major/minor, perimeter (closed), closing (its last segment), convex_perimeter,
+        elongation, rectangularity (NaN unless status is OK); centre_x/y, star_shapedness,
+        winding of the polar series.
+    r, rho : np.ndarray
+        (K, n_r + 1) and (K, n_rho + 1) complex coefficients of ``r`` and ``r^-2`` (NaN unless
+        the series status is ``SERIES_OK``).
+    """
+
+    status: np.ndarray
+    series_status: np.ndarray
+    values: dict[str, np.ndarray]
+    r: np.ndarray
+    rho: np.ndarray
+
+
+def measure_contours(
+    points: np.ndarray,
+    offsets: np.ndarray,
+    *,
+    min_points: int = 3,
+    series: np.ndarray | None = None,
+    centroids: np.ndarray | None = None,
+    max_elongation: float = math.inf,
+    n_r: int = -1,
+    n_rho: int = -1,
+) -> MeasuredContours:
+    """Run the shape kernel on K concatenated contours (one compiled call).
+
+    Parameters
+    ----------
+    points : np.ndarray
+        (N, 2) points of all contours, contour k is ``points[offsets[k]:offsets[k + 1]]``.
+    offsets : np.ndarray
+        (K + 1,) int offsets rising from 0 to N.
+    min_points : int
+        Contours with fewer points get status ``TOO_FEW_POINTS``.
+    series : np.ndarray, optional
+        (K,) bool: where to compute the polar series (default: everywhere, if any harmonic is
+        asked for).
+    centroids : np.ndarray, optional
+        (K, 2) centres of the polar series; by default the area centroids.
+    max_elongation : float
+        No series where the elongation is at least this (lines need none); ``inf``: no limit.
+    n_r, n_rho : int
+        Highest harmonic of ``r`` and of ``r^-2`` (-1: none).
+
+    Raises
+    ------
+    ValueError
+        If ``points`` is not (N, 2) or ``offsets`` do not rise from 0 to N.
+    """
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    off = np.ascontiguousarray(offsets, dtype=np.int64)
+    k = len(off) - 1
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise ValueError(f"points must be an (N, 2) array of (x, y), got shape {pts.shape}")
+    if off.ndim != 1 or k < 0 or off[0] != 0 or off[-1] != len(pts) or np.any(off[1:] < off[:-1]):
+        raise ValueError("offsets must rise from 0 to len(points)")
+    want = np.ones(k, np.uint8) if series is None else np.ascontiguousarray(series, np.uint8)
+    if centroids is None:
+        centres, given = np.zeros((k, 2)), False
+    else:
+        centres = np.ascontiguousarray(centroids, dtype=np.float64).reshape(k, 2)
+        given = True
+    status, series_status, values, r, rho = _kernel.measure_contours(
+        pts, off, min_points, want.reshape(k), centres, given, max_elongation, n_r, n_rho
+    )
+    return MeasuredContours(
+        status, series_status, dict(zip(_kernel.VALUE_NAMES, values.T, strict=True)), r, rho
+    )
+
+
+def raise_for_status(status: int, name: str = "points") -> None:
+    """Raise the ValueError of a descriptor status of :func:`measure_contours` (not OK)."""
+    if status == _kernel.OK:
+        return
+    if status == _kernel.TOO_FEW_POINTS:
+        raise ValueError(f"{name} has too few points")
+    if status == _kernel.NON_FINITE:
+        raise ValueError(f"{name} contains NaN or infinite coordinates")
+    if status == _kernel.ONE_POINT:
+        raise ValueError(f"{name}: all points are identical; a shape needs at least 2 distinct")
+    raise ValueError(
+        f"{name}: the polygon crosses itself so that a second moment is negative; "
+        "it has no semi-axes"
+    )
+
+
 def drop_repeated_points_batch(
     points: np.ndarray, offsets: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -467,28 +503,8 @@ def drop_repeated_points_batch(
         The contours without points equal to their predecessor and without a last point equal
         to the first.
     """
-    pts = np.asarray(points, dtype=np.float64)
-    off = np.asarray(offsets, dtype=np.int64)
-    keep = np.ones(len(pts), dtype=bool)
-    x, y = pts[:, 0], pts[:, 1]
-    np.not_equal(x[1:], x[:-1], out=keep[1:])
-    keep[1:] |= y[1:] != y[:-1]
-    keep[off[:-1]] = True  # a contour's first point has no predecessor
-    if keep.all():
-        counts = np.diff(off)
-        wrap = (counts > 1) & (x[off[:-1]] == x[off[1:] - 1]) & (y[off[:-1]] == y[off[1:] - 1])
-        if not wrap.any():
-            return pts, off
-    counts = np.add.reduceat(keep.astype(np.int64), off[:-1]) if len(pts) else off[1:] * 0
-    pts = pts[keep]
-    off = np.concatenate(([0], np.cumsum(counts)))
-    wrap = (counts > 1) & np.all(pts[off[:-1]] == pts[np.maximum(off[1:] - 1, 0)], axis=1)
-    if wrap.any():
-        keep = np.ones(len(pts), dtype=bool)
-        keep[off[1:][wrap] - 1] = False
-        pts = pts[keep]
-        off = np.concatenate(([0], np.cumsum(counts - wrap)))
-    return pts, off
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    return _kernel.drop_repeated(pts, np.ascontiguousarray(offsets, dtype=np.int64), True)
 
 
 def shape_descriptors_batch(
@@ -496,10 +512,9 @@ def shape_descriptors_batch(
 ) -> DescriptorArrays:
     """The label descriptors of :func:`shape_descriptors` for K contours at once.
 
-    Area, centroid and second moments are per-contour sums over the edges
-    (``np.add.reduceat``); the minimum-area box is ``cv2.minAreaRect`` per contour (rotating
-    calipers on the convex hull, a few microseconds each). Perimeter, compactness, roundness
-    and bending energy are left out (the shape label does not use them).
+    One call of the shape kernel (:func:`measure_contours`) for all contours; the values are
+    those of :func:`shape_descriptors`. Perimeter, compactness, roundness and bending energy
+    are left out (the shape label does not use them).
 
     Parameters
     ----------
@@ -515,102 +530,17 @@ def shape_descriptors_batch(
     -------
     DescriptorArrays
     """
-    pts = np.asarray(points, dtype=np.float64)
-    off = np.asarray(offsets, dtype=np.int64)
-    counts = np.diff(off)
-    use = counts >= min_points
-    out = _empty_descriptors(len(counts))
-    if not use.any():
-        return out
-    if not use.all():
-        pts = pts[np.repeat(use, counts)]
-        off = np.concatenate(([0], np.cumsum(counts[use])))
-    _fill_descriptors(out, np.flatnonzero(use), *drop_repeated_points_batch(pts, off))
-    return out
-
-
-def _empty_descriptors(k: int) -> DescriptorArrays:
-    nan = np.full(k, np.nan)
+    measured = measure_contours(points, offsets, min_points=min_points)
+    v = measured.values
     return DescriptorArrays(
-        np.zeros(k, bool), nan.copy(), np.full((k, 2), np.nan), nan.copy(), nan.copy(),
-        nan.copy(), nan.copy(),
-    )  # fmt: skip
-
-
-def _fill_descriptors(
-    out: DescriptorArrays, idx: np.ndarray, q: np.ndarray, q_off: np.ndarray
-) -> None:
-    """Write the descriptors of the deduplicated contours ``q`` into rows ``idx`` of ``out``."""
-    counts = np.diff(q_off)
-    distinct = counts >= 2
-    idx = idx[distinct]
-    if not distinct.all():
-        sub = np.repeat(distinct, counts)
-        q, counts = q[sub], counts[distinct]
-        q_off = np.concatenate(([0], np.cumsum(counts)))
-    out.valid[idx] = True
-    starts = q_off[:-1]
-    owner = np.repeat(np.arange(len(counts)), counts)
-    nxt = np.arange(1, len(q) + 1)
-    nxt[q_off[1:] - 1] = starts  # the last point joins the first
-
-    area, centroid, mean = _polygon_area_centroids(q, q_off, owner, nxt)
-    px, py = q[:, 0] - mean[owner, 0], q[:, 1] - mean[owner, 1]
-    qx, qy = px[nxt], py[nxt]
-    seg_len = np.hypot(qx - px, qy - py)
-    length = np.add.reduceat(seg_len, starts)
-    has_area = 4.0 * math.pi * area > _NO_AREA_COMPACTNESS * length**2
-    if not has_area.all():  # no area (a traced line): the curve centroid (_curve_centroid)
-        mid_x, mid_y = 0.5 * (q[:, 0] + q[nxt, 0]), 0.5 * (q[:, 1] + q[nxt, 1])
-        curve = (
-            np.column_stack(
-                (np.add.reduceat(mid_x * seg_len, starts), np.add.reduceat(mid_y * seg_len, starts))
-            )
-            / np.where(length > 0, length, 1.0)[:, None]
-        )
-        centroid = np.where(has_area[:, None], centroid, curve)
-        area = np.where(has_area, area, 0.0)
-
-    # second moments about the centroid (_moment_axes)
-    px, py = q[:, 0] - centroid[owner, 0], q[:, 1] - centroid[owner, 1]
-    qx, qy = px[nxt], py[nxt]
-    xx = px * px + px * qx + qx * qx
-    yy = py * py + py * qy + qy * qy
-    xy = 2.0 * px * py + px * qy + qx * py + 2.0 * qx * qy
-    cross = px * qy - qx * py
-    area2 = np.add.reduceat(cross, starts)
-    area2 = np.where(has_area, area2, 1.0)
-    weight = np.where(has_area[owner], cross, seg_len / np.where(length > 0, length, 1.0)[owner])
-    sxx = np.add.reduceat(weight * xx, starts)
-    syy = np.add.reduceat(weight * yy, starts)
-    sxy = np.add.reduceat(weight * xy, starts)
-    sxx = np.where(has_area, sxx / (6.0 * area2), sxx / 3.0)
-    syy = np.where(has_area, syy / (6.0 * area2), syy / 3.0)
-    sxy = np.where(has_area, sxy / (12.0 * area2), sxy / 6.0)
-    scale = np.where(has_area, 4.0, 3.0)
-    half_trace = 0.5 * (sxx + syy)
-    root = np.hypot(0.5 * (sxx - syy), sxy)
-    major2 = scale * (half_trace + root)
-    # a self-intersecting polygon can have a negative "variance": shape_descriptors raises
-    out.valid[idx[major2 < 0]] = False
-    out.semi_major[idx] = np.sqrt(np.maximum(major2, 0.0))
-    out.semi_minor[idx] = np.sqrt(scale * np.maximum(half_trace - root, 0.0))
-
-    # minimum-area box (min_area_box of the convex hull), centred for float32
-    centred = np.empty((len(q), 2), np.float32)
-    centred[:, 0], centred[:, 1] = q[:, 0] - mean[owner, 0], q[:, 1] - mean[owner, 1]
-    bounds = zip(starts.tolist(), q_off[1:].tolist(), strict=True)
-    sides = np.array([cv2.minAreaRect(centred[s:e])[1] for s, e in bounds], np.float64)
-    sides = sides.reshape(-1, 2)
-    long, short = sides.max(axis=1), sides.min(axis=1)
-    boxed = short > 1e-12 * long
-    box_area = np.where(boxed, long * short, 0.0)
-    out.elongation[idx] = np.where(boxed, long / np.where(boxed, short, 1.0), np.inf)
-    out.rectangularity[idx] = np.where(
-        box_area > 0, np.minimum(area / np.where(box_area > 0, box_area, 1.0), 1.0), 0.0
+        valid=measured.status == _kernel.OK,
+        area=v["area"],
+        centroid=np.column_stack((v["centroid_x"], v["centroid_y"])),
+        semi_major=v["semi_major"],
+        semi_minor=v["semi_minor"],
+        elongation=v["elongation"],
+        rectangularity=v["rectangularity"],
     )
-    out.area[idx] = area
-    out.centroid[idx] = centroid
 
 
 def polygon_area_centroid_batch(
@@ -633,31 +563,5 @@ def polygon_area_centroid_batch(
     centroid : np.ndarray
         (K, 2) area centroids (the vertex mean where the area is zero).
     """
-    pts = np.asarray(points, dtype=np.float64)
-    off = np.asarray(offsets, dtype=np.int64)
-    counts = np.diff(off)
-    owner = np.repeat(np.arange(len(counts)), counts)
-    nxt = np.arange(1, len(pts) + 1)
-    nxt[off[1:] - 1] = off[:-1]
-    area, centroid, _ = _polygon_area_centroids(pts, off, owner, nxt)
-    return area, centroid
-
-
-def _polygon_area_centroids(
-    pts: np.ndarray, off: np.ndarray, owner: np.ndarray, nxt: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Areas, area centroids and vertex means of K polygons (``nxt``: index of the next vertex)."""
-    starts = off[:-1]
-    counts = np.diff(off)
-    mean = np.column_stack((np.add.reduceat(pts[:, 0], starts), np.add.reduceat(pts[:, 1], starts)))
-    mean /= counts[:, None]
-    px, py = pts[:, 0] - mean[owner, 0], pts[:, 1] - mean[owner, 1]
-    qx, qy = px[nxt], py[nxt]
-    cross = px * qy - qx * py
-    signed_area = 0.5 * np.add.reduceat(cross, starts)
-    has_area = signed_area != 0.0
-    six_area = np.where(has_area, 6.0 * signed_area, 1.0)
-    cx = np.add.reduceat((px + qx) * cross, starts) / six_area
-    cy = np.add.reduceat((py + qy) * cross, starts) / six_area
-    centroid = mean + np.where(has_area[:, None], np.column_stack((cx, cy)), 0.0)
-    return np.abs(signed_area), centroid, mean
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    return _kernel.area_centroids(pts, np.ascontiguousarray(offsets, dtype=np.int64))

@@ -1,29 +1,38 @@
 """Colour Canny edges, ordered edge linking and sub-pixel refinement (section 3.1).
 
 The paper combines Canny's hysteresis with a region growing that "collects all points of the edge
-contour with a known sorting". We get the same ordered chains without a Python loop over pixels:
+contour with a known sorting". We get the same ordered chains in one compiled pass over the edge
+pixels (:mod:`labauto.vision.kernels.edges`), without a Python loop over pixels or contours:
 
 1. ``cv2.Canny(gx, gy, low, high, L2gradient=True)`` on our own colour gradient (eq. 2);
 2. the edge pixels are thinned to minimal 8-connected chains (:func:`thin_edges`: Canny leaves
    4-connected staircases that the tracer would meet only on its way back, out of order), then
-   ``cv2.findContours(..., RETR_CCOMP, CHAIN_APPROX_NONE)`` traces the outer boundary of every
-   8-connected edge component (hole boundaries are dropped: they repeat the same thin edge);
+   the outer boundary of every 8-connected edge component is traced in the 8-neighbourhood
+   (Suzuki and Abe's border following, step for step as ``cv2.findContours(...,
+   RETR_CCOMP, CHAIN_APPROX_NONE)`` traces it; hole boundaries are not traced: they repeat the
+   same thin edge);
 3. an open chain is traced out and back (A..B..A). We rotate such a trace to start at its first
    turnaround point (where the trace reverses, i.e. an end of the chain) and keep every pixel
-   once, at its first visit. An open chain comes out ordered from one end to the
-   other; a closed thin loop comes out once around (its outer trace). Components with more than
-   two ends (branches) keep all their pixels, branches following each other, which is what the
-   paper's region growing gives too.
+   once, at its first visit (:func:`traces_to_chains`). An open chain comes out ordered from one
+   end to the other; a closed thin loop comes out once around (its outer trace). Components
+   with more than two ends (branches) keep all their pixels, branches following each other,
+   which is what the paper's region growing gives too. Chains are listed in the order
+   ``findContours`` lists the components (reverse raster order of their first pixels).
 
 Sub-pixel refinement follows Devernay (1995): along the axis (x or y) closest to the gradient
 direction, fit a parabola through the gradient magnitude at the edge pixel and its two neighbours
-and move the point to the vertex (at most half a pixel).
+and move the point to the vertex (at most half a pixel). :func:`edge_contours` does steps 2-3,
+the gradient lookup and the refinement in one kernel call.
 """
 
 from __future__ import annotations
 
+import threading
+
 import cv2
 import numpy as np
+
+from labauto.vision.kernels import edges as _kernel
 
 
 def canny_edges(gx: np.ndarray, gy: np.ndarray, low: float, high: float) -> np.ndarray:
@@ -78,8 +87,11 @@ def _removable_table() -> np.ndarray:
 
 
 _REMOVABLE = _removable_table()
+_REMOVABLE_U8 = _REMOVABLE.view(np.uint8)  # the same table, as the kernel reads it
 #: (dy, dx) of the ring neighbours N, NE, E, SE, S, SW, W, NW
 _NEIGHBOURS = ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1))
+#: thinning passes used by the linker (Canny output needs 1-2)
+_THIN_PASSES = 2
 
 
 def thin_edges(edges: np.ndarray, max_iter: int = 2) -> np.ndarray:
@@ -88,10 +100,11 @@ def thin_edges(edges: np.ndarray, max_iter: int = 2) -> np.ndarray:
     Canny leaves 4-connected staircases and short two-pixel-thick runs; a boundary trace then
     meets some pixels only on its way back, which scrambles the order of the chain. We remove
     every pixel whose neighbours stay 8-connected without it and that is not a chain end (see
-    :func:`_removable_table`). Pixels are decided in four checkerboard classes (x and y
-    parity): two pixels of one class are never neighbours, so a class is decided at once,
-    vectorised, without breaking a chain. The end of a two-pixel-thick run may lose a pixel
-    per pass.
+    :func:`_removable_table`). Pixels are decided in four checkerboard classes (parity of the
+    row and of the linear index in the padded map, i.e. of x and y): two pixels of one class
+    are never neighbours, so a class is decided at once without breaking a chain. A pass decides
+    the four classes in turn; passes repeat until nothing changes or ``max_iter`` passes are
+    done. The end of a two-pixel-thick run may lose a pixel per pass.
 
     Parameters
     ----------
@@ -106,60 +119,19 @@ def thin_edges(edges: np.ndarray, max_iter: int = 2) -> np.ndarray:
         uint8 (H+2)x(W+2) 0/1 map: the thinned edges with a one-pixel zero border (pixel ``(x, y)``
         of ``edges`` is at ``(x + 1, y + 1)``; pass ``offset=(-1, -1)`` to ``cv2.findContours``).
     """
-    binary = cv2.threshold(edges, 0, 1, cv2.THRESH_BINARY)[1]
+    binary = (_edge_map(edges) != 0).view(np.uint8)
     padded = cv2.copyMakeBorder(binary, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
-    flat = padded.ravel()
-    stride = padded.shape[1]
-    pixels = _nonzero_sparse(flat)
-    if pixels.shape[0] == 0:
-        return padded
-    neighbour_offsets = np.array([dy * stride + dx for dy, dx in _NEIGHBOURS], np.intp)
-    parity = ((pixels // stride) & 1) * 2 + (pixels & 1)
-    classes = [pixels[parity == c] for c in range(4)]
-    # A pixel found not removable stays so until a neighbour goes: after the first pass only
-    # pixels with a neighbour removed since their last decision ("stale") are decided again.
-    stale = np.zeros_like(flat)
-    for iteration in range(max_iter):
-        changed = False
-        for c, at in enumerate(classes):
-            if iteration > 0:
-                at = at[stale[at] != 0]
-                if at.shape[0] == 0:
-                    continue
-            code = np.zeros(at.shape[0], np.uint8)
-            for bit, offset in enumerate(neighbour_offsets.tolist()):
-                code |= flat[at + offset] << bit
-            stale[at] = 0
-            remove = _REMOVABLE[code] & (flat[at] != 0)
-            if remove.any():
-                changed = True
-                gone = at[remove]
-                flat[gone] = 0
-                stale[gone[:, None] + neighbour_offsets] = 1
-                classes[c] = classes[c][flat[classes[c]] != 0]
-        if not changed:
-            break
+    _kernel.thin(padded, _REMOVABLE_U8, int(max_iter))
     return padded
-
-
-def _nonzero_sparse(flat: np.ndarray) -> np.ndarray:
-    """Linear indices of the nonzero bytes of a sparse contiguous uint8 array, ascending.
-
-    Scans 8 bytes at a time (a uint64 view), then looks only inside the nonzero words; on a
-    1280x1024 edge map (~18k edge pixels) about 0.7 ms against 0.8 ms for ``cv2.findNonZero``.
-    """
-    n8 = flat.shape[0] // 8 * 8
-    words = np.flatnonzero(flat[:n8].view(np.uint64))
-    inside = (words[:, None] * 8 + np.arange(8)).ravel()
-    found = inside[flat[inside] != 0]
-    tail = np.flatnonzero(flat[n8:])
-    return np.concatenate((found, tail + n8)) if tail.shape[0] else found
 
 
 def link_edges(
     edges: np.ndarray, min_length: int = 1, max_length: int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Collect the pixels of a binary edge map into ordered chains, each pixel once.
+
+    Thinning (:func:`thin_edges`), the outer trace of every 8-connected component and
+    :func:`traces_to_chains`, in one kernel call; see the module docstring.
 
     Parameters
     ----------
@@ -175,15 +147,58 @@ def link_edges(
     offsets : np.ndarray
         (K + 1,) int64; chain k is ``points[offsets[k]:offsets[k + 1]]``.
     """
-    traces, hierarchy = cv2.findContours(
-        thin_edges(edges), cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE, offset=(-1, -1)
+    edges = _edge_map(edges)
+    return _kernel.link(
+        edges, _work_map(edges.shape), _REMOVABLE_U8, _THIN_PASSES, *_limits(min_length, max_length)
     )
-    if not traces:
-        return np.empty((0, 2), np.int32), np.zeros(1, np.int64)
-    outer = hierarchy[0, :, 3] < 0
-    # a chain of n pixels gives a trace of n (closed) to 2n - 2 (open) points
-    keep = [t for t, o in zip(traces, outer, strict=True) if o and len(t) >= min_length]
-    return traces_to_chains(keep, edges.shape[1], min_length, max_length)
+
+
+def edge_contours(
+    edges: np.ndarray,
+    gx: np.ndarray,
+    gy: np.ndarray,
+    min_length: int = 1,
+    max_length: int | None = None,
+    subpixel: bool = True,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ordered chains of an edge map with their gradients and (sub-pixel) positions.
+
+    :func:`link_edges`, :func:`gradient_at` and :func:`refine_subpixel` in one kernel call.
+
+    Parameters
+    ----------
+    edges : np.ndarray
+        uint8 HxW map, nonzero on edge pixels.
+    gx, gy : np.ndarray
+        int16 HxW gradient the edges were found on.
+    min_length, max_length : int
+        Keep chains with ``min_length <= n_points <= max_length`` (None: no upper bound).
+    subpixel : bool
+        Refine the points (else they are the pixel coordinates).
+
+    Returns
+    -------
+    points : np.ndarray
+        (N, 2) float64 points ``(x, y)`` of all chains, concatenated in order.
+    offsets : np.ndarray
+        (K + 1,) int64; chain k is ``points[offsets[k]:offsets[k + 1]]``.
+    gradients : np.ndarray
+        (N, 2) float32 gradient ``(gx, gy)`` at each pixel.
+    closed : np.ndarray
+        (K,) bool: the first and last pixels of a chain of more than two are 8-neighbours.
+    """
+    edges = _edge_map(edges)
+    gx, gy = _gradient_pair(gx, gy, edges.shape)
+    return _kernel.link(
+        edges,
+        _work_map(edges.shape),
+        _REMOVABLE_U8,
+        _THIN_PASSES,
+        *_limits(min_length, max_length),
+        gx,
+        gy,
+        bool(subpixel),
+    )
 
 
 def traces_to_chains(
@@ -191,10 +206,12 @@ def traces_to_chains(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Turn boundary traces (``cv2.findContours`` output) into chains with each pixel once.
 
-    A trace that visits most of its pixels twice (fewer than 3/4 distinct: an open chain traced
-    out and back) is rotated to start at its first turnaround (``t[i - 1] == t[i + 1]``);
-    closed loops keep their start (a one-pixel spur on a loop must not open it). Then only the
-    first visit of every pixel is kept. See the module docstring.
+    A trace that visits most of its pixels twice (fewer than 3/4 of its points are pixels not
+    met before: an open chain traced out and back) is rotated to start at its first turnaround
+    (``t[i - 1] == t[i + 1]``, indices modulo its length); closed loops keep their start (a
+    one-pixel spur on a loop must not open it). Then only the first visit of every pixel is
+    kept, over all traces in order (a pixel of an earlier trace is not repeated). See the
+    module docstring.
 
     Parameters
     ----------
@@ -213,52 +230,23 @@ def traces_to_chains(
     if not traces:
         return np.empty((0, 2), np.int32), np.zeros(1, np.int64)
     lengths = np.fromiter((len(t) for t in traces), np.int64, len(traces))
-    pts = np.concatenate(traces).reshape(-1, 2)
-    n_total = pts.shape[0]
-    starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
-    contour = np.repeat(np.arange(len(traces)), lengths)
-    local = np.arange(n_total) - starts[contour]
-    n = lengths[contour]
-    lin = pts[:, 1].astype(np.int64) * width + pts[:, 0]
-    # open chains (traced out and back: few distinct pixels) start at their first turnaround
-    unique = np.bincount(contour[_first_visits(lin)], minlength=len(traces))
-    out_and_back = unique < 0.75 * lengths
-    prev = starts[contour] + (local - 1) % n
-    nxt = starts[contour] + (local + 1) % n
-    turn = (lin[prev] == lin[nxt]) & (n > 2) & out_and_back[contour]
-    big = np.iinfo(np.int64).max
-    first_turn = np.minimum.reduceat(np.where(turn, local, big), starts)
-    rotation = np.where(first_turn == big, 0, first_turn)
-    # position j of a rotated trace holds its old point (j + rotation) mod n
-    order = starts[contour] + (local + rotation[contour]) % n
-    order = order[_first_visits(lin[order])]
-    contour = contour[order]
-    counts = np.bincount(contour, minlength=len(traces))
-    ok = counts >= min_length
-    if max_length is not None:
-        ok &= counts <= max_length
-    sel = ok[contour]
-    points = pts[order[sel]]
-    offsets = np.concatenate(([0], np.cumsum(counts[ok])))
-    return points, offsets
-
-
-def _first_visits(lin: np.ndarray) -> np.ndarray:
-    """Bool mask of the first occurrence of every value of ``lin`` (non-negative ints)."""
-    idx = np.arange(lin.shape[0])
-    first = np.empty(int(lin.max()) + 1, np.int64)
-    first[lin[::-1]] = idx[::-1]  # repeated indices: the last write (earliest index) wins
-    return first[lin] == idx
+    pts = np.ascontiguousarray(np.concatenate(traces).reshape(-1, 2), np.int32)
+    if width < 1:
+        raise ValueError(f"width must be >= 1, got {width}")
+    return _kernel.chains_from_traces(pts, lengths, int(width), *_limits(min_length, max_length))
 
 
 def gradient_at(gx: np.ndarray, gy: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Return the (N, 2) float32 gradient ``(gx, gy)`` at integer pixel ``points`` (x, y)."""
-    x, y = points[:, 0], points[:, 1]
-    return np.column_stack((gx[y, x], gy[y, x])).astype(np.float32)
+    return _sample(points, gx, gy, subpixel=False)[1]
 
 
 def refine_subpixel(points: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
     """Move edge pixels to the sub-pixel maximum of the gradient magnitude (Devernay).
+
+    With ``m`` the float32 gradient magnitude and ``m-``, ``m0``, ``m+`` its values at the
+    pixel's two neighbours along the chosen axis and at the pixel, the offset is
+    ``0.5 (m- - m+) / (m- - 2 m0 + m+)``, computed in float32 and clipped to +-0.5.
 
     Parameters
     ----------
@@ -271,29 +259,72 @@ def refine_subpixel(points: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.nd
     -------
     np.ndarray
         (N, 2) float64 refined coordinates. Each point moves by at most 0.5 px along x or y
-        (whichever is closer to its gradient direction); points on the image border and points
-        that are not a strict local maximum stay where they are.
+        (whichever is closer to its gradient direction; x on ties); points on the image border
+        and points that are not a strict local maximum stay where they are.
     """
+    return _sample(points, gx, gy, subpixel=True)[0]
+
+
+def _sample(
+    points: np.ndarray, gx: np.ndarray, gy: np.ndarray, subpixel: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 2) float64 positions (refined if ``subpixel``) and float32 gradients at ``points``."""
+    gx, gy = _gradient_pair(gx, gy)
+    pts = np.asarray(points)
+    if pts.ndim != 2 or pts.shape[1] != 2 or not np.issubdtype(pts.dtype, np.integer):
+        raise ValueError(f"points must be (N, 2) integer (x, y), got {pts.dtype} {pts.shape}")
     h, w = gx.shape
-    x = points[:, 0].astype(np.intp)
-    y = points[:, 1].astype(np.intp)
-    out = points.astype(np.float64)
-    gxp, gyp = gx[y, x].astype(np.float32), gy[y, x].astype(np.float32)
-    along_x = np.abs(gxp) >= np.abs(gyp)
-    sx, sy = along_x.astype(np.intp), (~along_x).astype(np.intp)
-    inner = (x - sx >= 0) & (x + sx < w) & (y - sy >= 0) & (y + sy < h)
-    xm, xp = np.where(inner, x - sx, x), np.where(inner, x + sx, x)
-    ym, yp = np.where(inner, y - sy, y), np.where(inner, y + sy, y)
+    if pts.shape[0] and (pts.min() < 0 or pts[:, 0].max() >= w or pts[:, 1].max() >= h):
+        raise ValueError(f"points must lie inside the {w}x{h} gradient image")
+    pts = np.ascontiguousarray(pts, np.int32)
+    out_points = np.empty((pts.shape[0], 2), np.float64)
+    out_gradients = np.empty((pts.shape[0], 2), np.float32)
+    _kernel.sample(pts, gx, gy, bool(subpixel), out_points, out_gradients)
+    return out_points, out_gradients
 
-    def magnitude(yy: np.ndarray, xx: np.ndarray) -> np.ndarray:
-        return np.hypot(gx[yy, xx].astype(np.float32), gy[yy, xx].astype(np.float32))
 
-    m0 = np.hypot(gxp, gyp)
-    mm, mp = magnitude(ym, xm), magnitude(yp, xp)
-    denom = mm - 2.0 * m0 + mp
-    ok = inner & (denom < 0)
-    offset = np.zeros(points.shape[0], np.float64)
-    offset[ok] = np.clip(0.5 * (mm[ok] - mp[ok]) / denom[ok], -0.5, 0.5)
-    out[:, 0] += offset * sx
-    out[:, 1] += offset * sy
-    return out
+def _edge_map(edges: np.ndarray) -> np.ndarray:
+    """Validate an HxW edge map; return it as C-contiguous uint8 (nonzero on edges)."""
+    if not isinstance(edges, np.ndarray) or edges.ndim != 2 or edges.size == 0:
+        shape = getattr(edges, "shape", None)
+        raise ValueError(f"edges must be a non-empty HxW numpy array, got shape {shape}")
+    if edges.dtype != np.uint8:
+        return (edges != 0).view(np.uint8)
+    return np.ascontiguousarray(edges)
+
+
+def _gradient_pair(
+    gx: np.ndarray, gy: np.ndarray, shape: tuple[int, ...] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Validate an int16 HxW gradient pair (of ``shape`` if given); return it C-contiguous."""
+    for name, g in (("gx", gx), ("gy", gy)):
+        if not isinstance(g, np.ndarray) or g.ndim != 2 or g.dtype != np.int16:
+            raise ValueError(f"{name} must be an int16 HxW numpy array")
+    if gx.shape != gy.shape or (shape is not None and gx.shape != shape):
+        raise ValueError(
+            f"gx {gx.shape} and gy {gy.shape} must have one shape"
+            + (f", that of the edge map {shape}" if shape is not None else "")
+        )
+    return np.ascontiguousarray(gx), np.ascontiguousarray(gy)
+
+
+def _limits(min_length: int, max_length: int | None) -> tuple[int, int]:
+    """Length filter as the kernel takes it (no upper bound: -1)."""
+    if max_length is not None and max_length < 0:
+        raise ValueError(f"max_length must be None or >= 0, got {max_length}")
+    return int(min_length), -1 if max_length is None else int(max_length)
+
+
+_WORK = threading.local()
+
+
+def _work_map(shape: tuple[int, ...]) -> np.ndarray:
+    """This thread's all-zero uint8 (H+2)x(W+2) work map for the linker (kept between calls).
+
+    The kernel leaves it all zero; keeping it saves an image-sized allocation (page faults) and
+    clearing per call.
+    """
+    work = getattr(_WORK, "map", None)
+    if work is None or work.shape != (shape[0] + 2, shape[1] + 2):
+        work = _WORK.map = np.zeros((shape[0] + 2, shape[1] + 2), np.uint8)
+    return work

@@ -8,29 +8,58 @@ mentions a bootstrap that fits parts of an ellipse and combines them. This modul
 * :func:`fit_ellipse_algebraic` - the direct least-squares fit of Fitzgibbon et al. in the
   numerically stable form of Halir and Flusser (1998), on points centred and scaled to unit RMS
   radius. Always an ellipse, one 3x3 eigenproblem, but biased toward small ellipses on noisy
-  short arcs. :func:`fit_ellipses_algebraic_batch` does the same for many contours at once
-  (one scatter matrix per contour by ``np.add.reduceat``, batched linear algebra).
+  short arcs. :func:`fit_ellipses_algebraic_batch` does the same for many contours at once.
 * :func:`fit_ellipse_geometric` - minimises the sum of squared orthogonal distances (Ahn,
   Rauh and Warnecke, Pattern Recognition 34, 2001). For every point the orthogonal contact
-  point on the current ellipse is found by a vectorised Newton iteration (below); then a
+  point on the current ellipse is found by a Newton iteration (below); then a
   Levenberg-Marquardt step on the 5 parameters ``(xc, yc, a, b, angle)`` uses the Jacobian of
   the orthogonal distances. At the contact point the distance is stationary along the ellipse,
   so its derivative is ``-n . d(x_contact)/d(parameter)`` at fixed ellipse parameter ``t``
   (``n`` the unit normal); this is Ahn's Jacobian in closed form. Seeded by the algebraic fit it
   converges in 3-6 iterations. :func:`fit_ellipses_geometric_batch` runs the same iteration for
-  many contours at once (per-contour damping and stopping, one Newton loop over all points,
-  batched 5x5 solves).
+  many contours at once (each contour with its own damping and stopping).
 * :func:`fit_ellipse_robust` - RANSAC (batched 5-point conics, MSAC scoring with the Sampson
   distance) or the paper's bootstrap (algebraic fits of random combinations of contiguous
   arcs), then the geometric fit on the inliers with the inlier set re-chosen by true
   orthogonal distance until it is stable.
+
+Algebraic fit (Halir-Flusser): with the design rows ``(x^2, xy, y^2, x, y, 1)`` of the centred,
+scaled points and their mean scatter ``S = [[S1, S2], [S2^T, S3]]`` (3x3 blocks, built from the
+14 moments ``x^i y^j``, ``1 <= i + j <= 4``), the linear part is eliminated,
+``T = -S3^-1 S2^T``, and the quadratic part ``a1`` is the eigenvector of
+``C1^-1 (S1 + S2 T)``, ``C1 = [[0, 0, 2], [0, -1, 0], [2, 0, 0]]``, with the largest
+``4 a c - b^2`` (> 0 for an ellipse; unit-norm eigenvectors). The conic is ``(a1, T a1)``.
+Collinear points (or fewer than 3 distinct ones) make S3 singular: smallest eigenvalue at most
+1e-10 times the largest.
+
+Geometric fit (Levenberg-Marquardt, per contour): Gauss-Newton steps on the normal equations
+``(J^T J + lam diag(J^T J) + 1e-12 trace(J^T J) I) step = -J^T d`` (the tiny ridge keeps the
+angle column solvable for a circle, where it is zero) while they lower the cost; when one does
+not, Marquardt damping is switched on (``lam = 1e-3``) and raised tenfold until a step
+succeeds, and lowered tenfold after every success (to 0 from 1e-6 or less). The fit stops when
+an accepted step is small (``|step| <= tol * max(a, b, 1)``, angle scaled by that size) or an
+undamped step gains less than ``tol`` relative, when a rejected step is small, when
+``lam > 1e12`` or after ``max_iter`` iterations. The contact roots of the last accepted
+parameters seed the next evaluation (2 Newton steps typical).
 
 Orthogonal contact point: in the ellipse's own frame, for a point ``(x, y)`` in the first
 quadrant the contact point is ``(a^2 x / (s + a^2), b^2 y / (s + b^2))`` where ``s`` is the root
 of ``F(s) = (a x / (s + a^2))^2 + (b y / (s + b^2))^2 - 1`` (Eberly). F is convex and decreasing
 for ``s > -b^2``; Newton started left of the root, at ``max(b y - b^2, a x - a^2)``, converges
 monotonically and cannot overshoot, so the iteration is safe for every point without bracketing.
+The first guess is first order (``p = c + s grad(Q)/2`` at the contact ``c``) or the root of
+the previous parameters; one Newton step from it lands left of the root from either side (F is
+convex) and the safe start replaces it if better. Every point iterates until its step is below
+``1e-9 (|s| + b^2)`` (at most 60 steps): Newton converges quadratically there, so the error left
+is far below that. (The kernel takes the step ``-F/F'`` over the common denominator
+``pa^3 pb^3``, ``pa = s + a^2``, ``pb = s + b^2``: one division instead of five, the same
+iterates up to rounding.) On the major axis inside the evolute (``y = 0``, ``a x <= a^2 - b^2``; the
+centre included) the root is ``s = -b^2``, a pole of F, and the contact point has a closed form.
 Other quadrants follow by symmetry.
+
+The loops (moments, contact points, normal equations, the whole Levenberg-Marquardt of every
+contour) are compiled: :mod:`labauto.vision.kernels.ellipse_fit`, one call per batch with the
+contours shared among threads; the single-contour functions are batches of one.
 
 Coordinates (DESIGN.md): pixels, x right, y down; :class:`~labauto.vision.ellipse.Ellipse`
 angles in degrees from +x toward +y, normalised so ``a >= b`` and angle in [0, 180).
@@ -44,10 +73,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from labauto.vision.ellipse import Ellipse
+from labauto.vision.kernels import ellipse_fit as _kernel
 
-_OK, _TOO_FEW, _DEGENERATE, _NOT_ELLIPSE = 0, 1, 2, 3
+_OK, _TOO_FEW, _DEGENERATE, _NOT_ELLIPSE, _BAD_INITIAL = 0, 1, 2, 3, 4
 _ROBUST_METHODS = ("ransac", "bootstrap")
-_MAX_NEWTON = 60  # contact-point Newton steps at most (2-4 are typical)
+_INT_MAX = 2**31 - 1
 
 
 @dataclass(frozen=True)
@@ -100,15 +130,10 @@ def fit_ellipse_algebraic(points: np.ndarray) -> Ellipse:
         otherwise degenerate (too few distinct points), or no ellipse fits them.
     """
     pts = _as_points(points)
-    mean = pts.mean(axis=0)
-    centred = pts - mean
-    scale = math.sqrt(float(np.einsum("ij,ij->", centred, centred)) / (2.0 * len(pts))) or 1.0
-    x, y = centred[:, 0] / scale, centred[:, 1] / scale
-    design = np.column_stack((x * x, x * y, y * y, x, y, np.ones_like(x)))
-    scatter = (design.T @ design / len(pts))[None]
-    params, status = _solve_scatter(scatter, mean[None], np.array([scale]))
+    params = np.empty((1, 5))
+    status = _run(pts, np.array([0, len(pts)], dtype=np.intp), params, seed=True)[0]
     _raise_for_status(int(status[0]), len(pts))
-    return Ellipse.normalised(*params[0])
+    return Ellipse.normalised(*params[0].tolist())
 
 
 def fit_ellipses_algebraic_batch(points: np.ndarray, offsets: np.ndarray) -> np.ndarray:
@@ -134,7 +159,16 @@ def fit_ellipses_algebraic_batch(points: np.ndarray, offsets: np.ndarray) -> np.
     ValueError
         If the arrays have the wrong shape, non-finite points or invalid offsets.
     """
-    pts = np.asarray(points, dtype=np.float64)
+    pts, off = _check_batch(points, offsets)
+    params = np.empty((len(off) - 1, 5))
+    status = _run(pts, off, params, seed=True)[0]
+    params[status != _OK] = np.nan
+    return params
+
+
+def _check_batch(points: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Validated C-contiguous float64 (N, 2) points and intp (K + 1,) offsets."""
+    pts = np.ascontiguousarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 2:
         raise ValueError(f"points must be an (N, 2) array of (x, y), got shape {pts.shape}")
     if not np.isfinite(pts).all():
@@ -147,112 +181,46 @@ def fit_ellipses_algebraic_batch(points: np.ndarray, offsets: np.ndarray) -> np.
             f"offsets must rise from 0 to len(points) = {len(pts)}, "
             f"got first {off[0]}, last {off[-1]}"
         )
-    params, status = _algebraic_batch(pts, off)
-    params[status != _OK] = np.nan
-    return params
+    return pts, np.ascontiguousarray(off, dtype=np.intp)
 
 
-def _algebraic_batch(points: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Halir-Flusser for K contours: (K, 5) parameters and (K,) status codes."""
-    counts = np.diff(offsets)
-    k = len(counts)
-    params = np.full((k, 5), np.nan)
-    status = np.full(k, _TOO_FEW)
-    use = counts >= 5
-    if not use.any():
-        return params, status
-    if not use.all():  # drop short contours, keep the rest contiguous
-        keep = np.repeat(use, counts)
-        sub_params, sub_status = _algebraic_batch(
-            points[keep], np.concatenate(([0], np.cumsum(counts[use])))
-        )
-        params[use], status[use] = sub_params, sub_status
-        return params, status
+def _run(
+    pts: np.ndarray,
+    off: np.ndarray,
+    params: np.ndarray,
+    *,
+    seed: bool,
+    max_iter: int = -1,
+    tol: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Run the kernel on validated input, in place on ``params``.
 
-    starts = offsets[:-1]
-    owner = np.repeat(np.arange(k), counts)
-    x, y = points[:, 0], points[:, 1]
-    mean = np.column_stack((np.add.reduceat(x, starts), np.add.reduceat(y, starts)))
-    mean /= counts[:, None]
-    x, y = x - mean[owner, 0], y - mean[owner, 1]
-    scale = np.sqrt(np.add.reduceat(x * x + y * y, starts) / (2.0 * counts))
-    scale = np.where(scale > 0, scale, 1.0)
-    inv = (1.0 / scale)[owner]
-    x *= inv
-    y *= inv
-    # The scatter of the design rows (x^2, xy, y^2, x, y, 1) holds only 14 distinct moments
-    # x^i y^j (1 <= i + j <= 4) besides the count: sum each once per contour.
-    xx, xy, yy = x * x, x * y, y * y
-    monomials = {
-        (1, 0): x, (0, 1): y, (2, 0): xx, (1, 1): xy, (0, 2): yy,
-        (3, 0): xx * x, (2, 1): xx * y, (1, 2): x * yy, (0, 3): yy * y,
-        (4, 0): xx * xx, (3, 1): xx * xy, (2, 2): xx * yy, (1, 3): xy * yy, (0, 4): yy * yy,
-    }  # fmt: skip
-    moments = {key: np.add.reduceat(m, starts) / counts for key, m in monomials.items()}
-    moments[0, 0] = np.ones(k)
-    exponents = ((2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0))
-    scatter = np.empty((k, 6, 6))
-    for i, (ei, fi) in enumerate(exponents):
-        for j, (ej, fj) in enumerate(exponents[i:], start=i):
-            scatter[:, i, j] = scatter[:, j, i] = moments[ei + ej, fi + fj]
-    return _solve_scatter(scatter, mean, scale)
-
-
-def _solve_scatter(
-    scatter: np.ndarray, mean: np.ndarray, scale: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Halir-Flusser on (K, 6, 6) mean scatter matrices of centred, scaled points.
-
-    Returns (K, 5) ``cx, cy, a, b, deg`` in the original coordinates and (K,) status codes.
+    Algebraic seeds into ``params`` when ``seed``, then the geometric fits from ``params`` when
+    ``max_iter >= 0``. Returns (K,) status codes, rms, iterations and converged flags (the last
+    three are meaningful where the status is ok and a geometric fit ran).
     """
-    s1, s2, s3 = scatter[:, :3, :3], scatter[:, :3, 3:], scatter[:, 3:, 3:]
-    # Collinear points (or fewer than 3 distinct ones) make S3 = sum [x y 1]^T [x y 1] singular.
-    s3_eig = np.linalg.eigvalsh(s3)
-    degenerate = s3_eig[:, 0] <= 1e-10 * s3_eig[:, -1]
-    s3 = np.where(degenerate[:, None, None], np.eye(3), s3)
-    t = -np.linalg.solve(s3, np.swapaxes(s2, 1, 2))  # (K, 3, 3)
-    m = s1 + s2 @ t
-    # C1^-1 M with C1 = [[0, 0, 2], [0, -1, 0], [2, 0, 0]]
-    m = np.stack((m[:, 2] / 2.0, -m[:, 1], m[:, 0] / 2.0), axis=1)
-    if not np.isfinite(m).all():
-        bad = ~np.isfinite(m).all(axis=(1, 2))
-        degenerate |= bad
-        m[bad] = np.eye(3)
-    _, vecs = np.linalg.eig(m)
-    vecs = vecs.real
-    cond = 4.0 * vecs[:, 0, :] * vecs[:, 2, :] - vecs[:, 1, :] ** 2  # (K, 3) per eigenvector
-    best = np.argmax(cond, axis=1)
-    a1 = vecs[np.arange(len(best)), :, best]
-    ok_cond = cond[np.arange(len(best)), best] > 0
-    a2 = (t @ a1[:, :, None])[:, :, 0]
-    conic = np.concatenate((a1, a2), axis=1)
-
-    geo, valid = _conic_to_params(conic)
-    geo[:, 0] = mean[:, 0] + scale * geo[:, 0]
-    geo[:, 1] = mean[:, 1] + scale * geo[:, 1]
-    geo[:, 2] *= scale
-    geo[:, 3] *= scale
-    status = np.where(degenerate, _DEGENERATE, np.where(ok_cond & valid, _OK, _NOT_ELLIPSE))
-    return geo, status
+    k = len(off) - 1
+    status = np.empty(k, dtype=np.int32)
+    rms = np.zeros(k)
+    iterations = np.zeros(k, dtype=np.int32)
+    converged = np.zeros(k, dtype=np.uint8)
+    _kernel.fit_ellipses(
+        pts, off, params, status, rms, iterations, converged, seed, min(max_iter, _INT_MAX), tol
+    )
+    return status, rms, iterations, converged
 
 
-def _conic_to_params(conic: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(K, 6) conics ``A x^2 + B xy + C y^2 + D x + E y + F`` -> (K, 5) ``cx, cy, a, b, deg``."""
-    conic = conic * np.where(conic[:, 0] + conic[:, 2] < 0, -1.0, 1.0)[:, None]
-    a_, b_, c_, d_, e_, f_ = conic.T
-    den = b_ * b_ - 4.0 * a_ * c_
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x0 = (2.0 * c_ * d_ - b_ * e_) / den
-        y0 = (2.0 * a_ * e_ - b_ * d_) / den
-        f0 = f_ + 0.5 * (d_ * x0 + e_ * y0)  # conic value at the centre
-        half_sum = 0.5 * (a_ + c_)
-        root = np.hypot(0.5 * (a_ - c_), 0.5 * b_)
-        lam_small, lam_big = half_sum - root, half_sum + root
-        major = np.sqrt(-f0 / lam_small)
-        minor = np.sqrt(-f0 / lam_big)
-    angle = (np.degrees(0.5 * np.arctan2(b_, a_ - c_)) + 90.0) % 180.0
-    valid = (den < 0) & (lam_small > 0) & (f0 < 0) & np.isfinite(major) & np.isfinite(minor)
-    return np.column_stack((x0, y0, major, minor, angle)), valid
+def _conic_to_params(conic: np.ndarray) -> np.ndarray:
+    """Conic ``(A, B, C, D, E, F)`` -> ``(cx, cy, major, minor, angle_deg)``.
+
+    The conic is ``A x^2 + B xy + C y^2 + D x + E y + F = 0``; the row is NaN or meaningless
+    when it is no real ellipse.
+    """
+    out = np.empty((1, 5))
+    _kernel.conics_to_params(
+        np.ascontiguousarray(conic, dtype=np.float64).reshape(1, 6), out, np.empty(1, np.uint8)
+    )
+    return out[0]
 
 
 def _raise_for_status(status: int, n: int) -> None:
@@ -277,7 +245,7 @@ def _as_points(points: np.ndarray, name: str = "points") -> np.ndarray:
         raise ValueError(f"an ellipse fit needs at least 5 points, got {len(pts)}")
     if not np.isfinite(pts).all():
         raise ValueError(f"{name} contains NaN or infinite coordinates")
-    return pts
+    return np.ascontiguousarray(pts)
 
 
 # ----------------------------------------------------------------------------- geometric
@@ -317,19 +285,25 @@ def fit_ellipse_geometric(
         As :func:`fit_ellipse_algebraic`, or for a bad ``initial``/``max_iter``/``tol``.
     """
     pts = _as_points(points)
-    if initial is None:
-        initial = fit_ellipse_algebraic(pts)
-    elif not isinstance(initial, Ellipse):
+    if initial is not None and not isinstance(initial, Ellipse):
         raise ValueError(f"initial must be an Ellipse or None, got {type(initial).__name__}")
     _check_iteration_args(max_iter, tol)
-    if not (initial.axes[1] > 0 and all(map(math.isfinite, (*initial.center, *initial.axes)))):
-        raise ValueError(f"initial ellipse must have finite centre and axes > 0, got {initial}")
-    start = np.array([[*initial.center, *initial.axes, initial.angle]])
-    params, rms, iterations, converged = _levenberg_marquardt(
-        pts, np.array([0, len(pts)]), start, int(max_iter), tol
+    params = np.empty((1, 5))
+    if initial is not None:
+        if not (initial.axes[1] > 0 and all(map(math.isfinite, (*initial.center, *initial.axes)))):
+            raise ValueError(f"initial ellipse must have finite centre and axes > 0, got {initial}")
+        params[0] = (*initial.center, *initial.axes, initial.angle)
+    status, rms, iterations, converged = _run(
+        pts,
+        np.array([0, len(pts)], dtype=np.intp),
+        params,
+        seed=initial is None,
+        max_iter=int(max_iter),
+        tol=float(tol),
     )
+    _raise_for_status(int(status[0]), len(pts))
     return EllipseFit(
-        Ellipse.normalised(*params[0]),
+        Ellipse.normalised(*params[0].tolist()),
         float(rms[0]),
         int(iterations[0]),
         bool(converged[0]),
@@ -345,12 +319,11 @@ def fit_ellipses_geometric_batch(
     max_iter: int = 50,
     tol: float = 1e-9,
 ) -> list[EllipseFit | None]:
-    """Geometric fits of many contours at once (one vectorised Levenberg-Marquardt).
+    """Geometric fits of many contours at once (one compiled call).
 
-    Every iteration finds the contact points of all contours' points in one Newton loop and
-    solves all 5x5 normal equations in one batched call, so 40 contours cost about as much
-    as 3-4 single fits. Each contour keeps its own damping and stops on its own, and only the
-    points of contours still iterating are evaluated.
+    The algebraic seeds and every contour's Levenberg-Marquardt run in one kernel call, the
+    contours shared among threads; each contour keeps its own damping and stops on its own,
+    exactly as :func:`fit_ellipse_geometric` (which is a batch of one).
 
     Parameters
     ----------
@@ -370,35 +343,32 @@ def fit_ellipses_geometric_batch(
         One entry per contour; None where the contour has fewer than 5 points, is degenerate
         or its initial row is not a finite ellipse.
     """
-    pts = np.asarray(points, dtype=np.float64)
-    seeds = fit_ellipses_algebraic_batch(pts, offsets) if initial is None else None
-    off = np.asarray(offsets)
-    if initial is not None:
-        seeds = np.array(initial, dtype=np.float64)
-        if seeds.shape != (len(off) - 1, 5):
-            raise ValueError(f"initial must have shape ({len(off) - 1}, 5), got {seeds.shape}")
-        fit_ellipses_algebraic_batch(pts, off)  # validates points and offsets
+    pts, off = _check_batch(points, offsets)
     _check_iteration_args(max_iter, tol)
-    assert seeds is not None
-    counts = np.diff(off)
-    ok = np.isfinite(seeds).all(axis=1) & (counts >= 5) & (seeds[:, 3] > 0) & (seeds[:, 2] > 0)
-    results: list[EllipseFit | None] = [None] * len(counts)
-    if not ok.any():
-        return results
-    keep = np.repeat(ok, counts)
-    sub_offsets = np.concatenate(([0], np.cumsum(counts[ok])))
-    params, rms, iterations, converged = _levenberg_marquardt(
-        pts[keep], sub_offsets, seeds[ok], int(max_iter), tol
+    k = len(off) - 1
+    if initial is None:
+        params = np.empty((k, 5))
+    else:
+        params = np.array(initial, dtype=np.float64, order="C")
+        if params.shape != (k, 5):
+            raise ValueError(f"initial must have shape ({k}, 5), got {params.shape}")
+    status, rms, iterations, converged = _run(
+        pts, off, params, seed=initial is None, max_iter=int(max_iter), tol=float(tol)
     )
-    for j, k in enumerate(np.flatnonzero(ok)):
-        results[k] = EllipseFit(
-            Ellipse.normalised(*params[j]),
-            float(rms[j]),
-            int(iterations[j]),
-            bool(converged[j]),
-            int(counts[k]),
-        )
-    return results
+    # the kernel's rows are normalised already (``Ellipse.normalised``'s rule)
+    fits = zip(
+        (status == _OK).tolist(),
+        params.tolist(),
+        rms.tolist(),
+        iterations.tolist(),
+        converged.astype(bool).tolist(),
+        np.diff(off).tolist(),
+        strict=True,
+    )
+    return [
+        EllipseFit(Ellipse((cx, cy), (a, b), angle), fit_rms, n_iter, conv, n) if ok else None
+        for ok, (cx, cy, a, b, angle), fit_rms, n_iter, conv, n in fits
+    ]
 
 
 def _check_iteration_args(max_iter: int, tol: float) -> None:
@@ -406,156 +376,6 @@ def _check_iteration_args(max_iter: int, tol: float) -> None:
         raise ValueError(f"max_iter must be an integer >= 0, got {max_iter!r}")
     if not (tol > 0 and math.isfinite(tol)):
         raise ValueError(f"tol must be a finite number > 0, got {tol!r}")
-
-
-def _levenberg_marquardt(
-    pts: np.ndarray, offsets: np.ndarray, start: np.ndarray, max_iter: int, tol: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Minimise each contour's squared orthogonal distances, all contours at once.
-
-    ``start`` is (K, 5) ``cx, cy, a, b, angle_deg``. Per contour: Gauss-Newton steps while
-    they lower the cost; when one does not, Marquardt damping ``lam * diag(J^T J)`` is switched
-    on and raised tenfold until a step succeeds, and lowered after every success. The contact
-    roots of the last accepted parameters seed the next evaluation (2 Newton steps typical).
-    Only the points of contours still iterating are evaluated: the working set shrinks as
-    contours converge.
-
-    Returns (K, 5) parameters (angle in degrees), (K,) rms, iterations and converged flags.
-    """
-    k = len(start)
-    counts = np.diff(offsets)
-    p = start.astype(np.float64).copy()
-    p[:, 4] = np.radians(p[:, 4])
-    lam = np.zeros(k)
-    iterations = np.zeros(k, dtype=int)
-    converged = np.zeros(k, dtype=bool)
-    active = np.ones(k, dtype=bool) if max_iter > 0 else np.zeros(k, dtype=bool)
-    # the working set: contours ``ids`` and their points, contour by contour
-    ids = np.arange(k)
-    w_counts = counts
-    w_starts = offsets[:-1]
-    local = np.repeat(ids, counts)
-    x = np.ascontiguousarray(pts[:, 0])
-    y = np.ascontiguousarray(pts[:, 1])
-    dist, jac, roots = _residuals(x, y, p, local)
-    cost = np.add.reduceat(dist * dist, w_starts)
-    rows, cols = np.triu_indices(5)
-    diagonal = np.arange(5)
-    while active.any():
-        keep = active[ids]
-        if not keep.all():  # drop the points of contours that stopped
-            on_points = np.repeat(keep, w_counts)
-            x, y, dist, roots = x[on_points], y[on_points], dist[on_points], roots[on_points]
-            jac = jac[:, on_points]
-            ids, w_counts = ids[keep], w_counts[keep]
-            w_starts = np.concatenate(([0], np.cumsum(w_counts)[:-1]))
-            local = np.repeat(np.arange(len(ids)), w_counts)
-        iterations[ids] += 1
-        # per-contour normal equations: J^T J (upper triangle) and J^T d, row by row (small
-        # temporaries stay in cache)
-        hess = np.empty((len(ids), 5, 5))
-        for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
-            hess[:, r, c] = hess[:, c, r] = np.add.reduceat(jac[r] * jac[c], w_starts)
-        grad = np.add.reduceat(jac * dist, w_starts, axis=1).T
-        diag = hess[:, diagonal, diagonal]
-        w_lam = lam[ids]
-        # a tiny ridge keeps the angle column solvable for a circle (where it is zero)
-        hess[:, diagonal, diagonal] += w_lam[:, None] * diag + 1e-12 * diag.sum(
-            axis=1, keepdims=True
-        )
-        step = -np.linalg.solve(hess, grad[:, :, None])[:, :, 0]
-        w_p = p[ids]
-        size = np.maximum(np.maximum(w_p[:, 2], w_p[:, 3]), 1.0)
-        step_px = np.sqrt((step[:, :4] ** 2).sum(axis=1) + (size * step[:, 4]) ** 2)
-        trial = w_p + step
-        valid = np.isfinite(trial).all(axis=1) & (trial[:, 2] > 0) & (trial[:, 3] > 0)
-        trial[~valid] = w_p[~valid]
-        dist_t, jac_t, roots_t = _residuals(x, y, trial, local, roots)
-        cost_t = np.where(valid, np.add.reduceat(dist_t * dist_t, w_starts), np.inf)
-
-        w_cost = cost[ids]
-        small_step = step_px <= tol * size
-        accept = cost_t <= w_cost
-        small_gain = accept & (w_lam == 0.0) & (w_cost - cost_t <= tol * w_cost)
-        p[ids[accept]] = trial[accept]
-        cost[ids[accept]] = cost_t[accept]
-        if accept.all():
-            dist, jac, roots = dist_t, jac_t, roots_t
-        elif accept.any():
-            moved = np.repeat(accept, w_counts)
-            dist = np.where(moved, dist_t, dist)
-            jac = np.where(moved, jac_t, jac)
-            roots = np.where(moved, roots_t, roots)
-        w_lam = np.where(accept, np.where(w_lam <= 1e-6, 0.0, w_lam / 10.0), w_lam)
-        reject = ~accept & ~small_step
-        w_lam = np.where(reject, np.where(w_lam == 0.0, 1e-3, w_lam * 10.0), w_lam)
-        lam[ids] = w_lam
-        done = (accept & (small_step | small_gain)) | (~accept & small_step)
-        converged[ids] |= done
-        active[ids] = ~done & (w_lam <= 1e12) & (iterations[ids] < max_iter)
-    p[:, 4] = np.degrees(p[:, 4])
-    rms = np.sqrt(cost / counts)
-    return p, rms, iterations, converged
-
-
-def _residuals(
-    x: np.ndarray,
-    y: np.ndarray,
-    params: np.ndarray,
-    local: np.ndarray,
-    roots: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_distances_and_jacobian` for K contours: point i belongs to contour ``local[i]``.
-
-    ``params`` is (K, 5) ``xc, yc, a, b, angle_rad``; the angle's sine and cosine are taken
-    once per contour. Returns the (n,) distances, the (5, n) Jacobian (one row per parameter,
-    so the normal equations reduce along contiguous rows) and the contact roots.
-    """
-    xc, yc, a, b, alpha = params.T
-    c, s = np.cos(alpha)[local], np.sin(alpha)[local]
-    a, b = a[local], b[local]
-    dx, dy = x - xc[local], y - yc[local]
-    u = c * dx + s * dy  # point in the ellipse frame
-    v = c * dy - s * dx
-    fu, fv, roots = _contact(u, v, a, b, roots)
-    nu, nv = fu / (a * a), fv / (b * b)  # outward normal (unnormalised) in the ellipse frame
-    norm = np.sqrt(nu * nu + nv * nv)  # (np.hypot is several times slower)
-    nu /= norm
-    nv /= norm
-    dist = nu * (u - fu) + nv * (v - fv)
-    jac = np.empty((5, len(x)))
-    jac[0] = s * nv - c * nu  # -n_world . e_x
-    jac[1] = -(s * nu + c * nv)
-    jac[2] = -nu * fu / a
-    jac[3] = -nv * fv / b
-    jac[4] = nu * fv - nv * fu
-    return dist, jac, roots
-
-
-def _distances_and_jacobian(
-    pts: np.ndarray, p: np.ndarray, roots: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Signed orthogonal distances (outside > 0), their (n, 5) Jacobian and the contact roots.
-
-    ``p`` is (n, 5) ``xc, yc, a, b, angle_rad`` per point (or (5,) for all points).
-    """
-    xc, yc, a, b, alpha = np.asarray(p).T
-    c, s = np.cos(alpha), np.sin(alpha)
-    dx, dy = pts[:, 0] - xc, pts[:, 1] - yc
-    u = c * dx + s * dy  # point in the ellipse frame
-    v = c * dy - s * dx
-    fu, fv, roots = _contact(u, v, a, b, roots)
-    nu, nv = fu / (a * a), fv / (b * b)  # outward normal (unnormalised) in the ellipse frame
-    norm = np.hypot(nu, nv)
-    nu, nv = nu / norm, nv / norm
-    dist = nu * (u - fu) + nv * (v - fv)
-    jac = np.empty((len(pts), 5))
-    jac[:, 0] = s * nv - c * nu  # -n_world . e_x
-    jac[:, 1] = -(s * nu + c * nv)
-    jac[:, 2] = -nu * fu / a
-    jac[:, 3] = -nv * fv / b
-    jac[:, 4] = nu * fv - nv * fu
-    return dist, jac, roots
 
 
 def contact_points(
@@ -575,90 +395,19 @@ def contact_points(
     tuple of np.ndarray
         The contact points ``(u_c, v_c)``: the nearest points on the ellipse.
     """
-    u = np.asarray(u, dtype=np.float64)
-    v = np.asarray(v, dtype=np.float64)
     if not (a > 0 and b > 0):
         raise ValueError(f"semi-axes must be > 0, got a={a!r}, b={b!r}")
-    cu, cv, _ = _contact(u, v, float(a), float(b), None)
+    u, v = np.broadcast_arrays(np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64))
+    cu, cv = np.empty(u.shape), np.empty(u.shape)
+    _kernel.contact_points(
+        np.ascontiguousarray(u).ravel(),
+        np.ascontiguousarray(v).ravel(),
+        float(a),
+        float(b),
+        cu.reshape(-1),
+        cv.reshape(-1),
+    )
     return cu, cv
-
-
-def _contact(
-    u: np.ndarray, v: np.ndarray, a: np.ndarray, b: np.ndarray, guess: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Contact points and roots ``s`` (module docstring) for per-point semi-axes a, b.
-
-    ``guess`` seeds ``s`` (it is symmetric in the two axes, so it survives an axis swap).
-    """
-    a = np.broadcast_to(np.asarray(a, dtype=np.float64), u.shape)
-    b = np.broadcast_to(np.asarray(b, dtype=np.float64), u.shape)
-    swap = a < b  # work with the longer axis along x
-    x = np.abs(np.where(swap, v, u))
-    y = np.abs(np.where(swap, u, v))
-    a, b = np.maximum(a, b), np.minimum(a, b)
-    a2, b2 = a * a, b * b
-    # On the major axis inside the evolute (y = 0, a x <= a^2 - b^2; the centre included) the
-    # root is s = -b^2, a pole of F: solved in closed form below, iterated as a dummy point.
-    inner = (y == 0) & (a * x <= a2 - b2)
-    any_inner = bool(inner.any())
-    if any_inner:
-        x_inner = x[inner]
-        x = np.where(inner, a, x)
-    ax, by = a * x, b * y
-    safe = np.maximum(by - b2, ax - a2)  # F(safe) >= 0: left of the root, and > -b^2
-    if guess is None:  # first order: p = c + s grad(Q)/2 at the contact c
-        qx, qy = x / a2, y / b2
-        guess = 0.5 * (x * qx + y * qy - 1.0) / (qx * qx + qy * qy)
-    # One Newton step from the guess lands left of the root from either side (F is convex);
-    # the safe start replaces it if better. From there Newton is monotone and cannot overshoot.
-    # Every point iterates until its own step is below 1e-9 (s + b^2): Newton converges
-    # quadratically there, so the error left is far below that. The points still moving go on
-    # alone (most stop after 2-4 steps).
-    s = np.maximum(guess, safe)
-    s = np.maximum(s + _newton_step(s, ax, by, a2, b2), safe)
-    idx = None  # all points
-    cur = [s, ax, by, a2, b2]
-    for _ in range(_MAX_NEWTON):
-        step = _newton_step(*cur)
-        cur[0] = cur[0] + step
-        busy = np.abs(step) > 1e-9 * (np.abs(cur[0]) + cur[4])
-        n_busy = int(np.count_nonzero(busy))
-        if n_busy == 0:
-            break
-        if n_busy <= len(busy) // 2:  # carry on with the busy points alone
-            s = _scatter(s, idx, cur[0])
-            idx = np.flatnonzero(busy) if idx is None else idx[busy]
-            cur = [v[busy] for v in cur]
-    s = _scatter(s, idx, cur[0])
-    cu = a2 * x / (s + a2)
-    cv = b2 * y / (s + b2)
-    if any_inner:
-        ai, bi = a[inner], b[inner]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cu_in = np.where(ai > bi, ai * ai * x_inner / (ai * ai - bi * bi), 0.0)
-        cu[inner] = cu_in
-        cv[inner] = bi * np.sqrt(np.clip(1.0 - (cu_in / ai) ** 2, 0.0, 1.0))
-        s[inner] = -bi * bi
-    cu, cv = np.where(swap, cv, cu), np.where(swap, cu, cv)
-    return np.copysign(cu, u), np.copysign(cv, v), s
-
-
-def _scatter(s: np.ndarray, idx: np.ndarray | None, values: np.ndarray) -> np.ndarray:
-    """``s`` with ``values`` written at ``idx`` (``values`` itself when ``idx`` is None: all)."""
-    if idx is None:
-        return values
-    s[idx] = values
-    return s
-
-
-def _newton_step(
-    s: np.ndarray, ax: np.ndarray, by: np.ndarray, a2: np.ndarray, b2: np.ndarray
-) -> np.ndarray:
-    """Newton step ``-F(s) / F'(s)`` for the contact root (module docstring)."""
-    pa, pb = s + a2, s + b2
-    ra, rb = ax / pa, by / pb
-    ra2, rb2 = ra * ra, rb * rb
-    return (ra2 + rb2 - 1.0) / (2.0 * (ra2 / pa + rb2 / pb))
 
 
 # ----------------------------------------------------------------------------- robust
@@ -766,7 +515,7 @@ def fit_ellipse_robust(
     try:
         current = fit_ellipse_algebraic(pts[inliers])
     except ValueError:
-        current = Ellipse.normalised(*_conic_to_params(conics[best : best + 1])[0][0])
+        current = Ellipse.normalised(*_conic_to_params(conics[best]).tolist())
         current = Ellipse.normalised(
             mean[0] + scale * current.center[0],
             mean[1] + scale * current.center[1],
@@ -804,9 +553,12 @@ def orthogonal_distances(points: np.ndarray, ellipse: Ellipse) -> np.ndarray:
     np.ndarray
         (n,) distances.
     """
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    p = np.array([*ellipse.center, *ellipse.axes, math.radians(ellipse.angle)])
-    return _distances_and_jacobian(pts, p)[0]
+    pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+    out = np.empty(len(pts))
+    _kernel.orthogonal_distances(
+        pts, *ellipse.center, *ellipse.axes, math.radians(ellipse.angle), out
+    )
+    return out
 
 
 def _five_point_conics(pts: np.ndarray, rng: np.random.Generator, trials: int) -> np.ndarray:

@@ -24,6 +24,14 @@ gives the axis ratio ``b/a`` exactly) and every other harmonic is deviation from
 ``r`` itself an ellipse also has harmonics 4, 6, 8 (a 1:4 ellipse: 0.29, 0.15, 0.08 of the mean
 radius), which would hide a small deformation; the classifier therefore measures ellipse-ness in
 ``rho`` and triangles, squares and stars in ``r``.
+
+Implementation: the per-edge integrals are summed per contour by the compiled shape kernel
+(:func:`labauto.vision.kernels.shape.measure_contours`, via
+:func:`labauto.vision.descriptors.measure_contours`), in the same call as the descriptors. There
+the factor ``e^{in phi}`` is folded into per-vertex powers: with ``w = e^{i theta}`` at the edge's
+ends, ``e^{in phi} int e^{inu} du = (w1^n - w0^n) / (in)``, so each vertex's powers serve both of
+its edges. :func:`classify_shapes` labels all contours of an image in one kernel call;
+the single-contour functions are a batch of one.
 """
 
 from __future__ import annotations
@@ -36,13 +44,11 @@ import numpy as np
 from labauto.vision.descriptors import (
     ShapeDescriptors,
     as_contour,
-    drop_repeated_points,
-    drop_repeated_points_batch,
-    polygon_area_centroid,
-    polygon_area_centroid_batch,
+    measure_contours,
+    raise_for_status,
     shape_descriptors,
-    shape_descriptors_batch,
 )
+from labauto.vision.kernels import shape as _kernel
 
 SHAPE_LABELS = ("circle", "ellipse", "des", "triangle", "rectangle", "line", "other")
 
@@ -157,7 +163,11 @@ def polar_fourier_series(
         For bad points or parameters, or when the contour does not wind around the centroid
         (centroid outside it or on it).
     """
-    coeffs, _ = _polar_series(points, centroid, n_harmonics, power)
+    if power not in (1, -2):
+        raise ValueError(f"power must be 1 or -2, got {power!r}")
+    n = _check_harmonics(n_harmonics)
+    r, rho, _ = _polar_series(points, centroid, n if power == 1 else -1, n if power == -2 else -1)
+    coeffs = r if power == 1 else rho
     return coeffs.real.copy(), coeffs.imag.copy()
 
 
@@ -194,7 +204,7 @@ def polar_harmonics(
     ValueError
         As :func:`polar_fourier_series`.
     """
-    coeffs, _ = _polar_series(points, centroid, n_harmonics, 1)
+    coeffs, _, _ = _polar_series(points, centroid, _check_harmonics(n_harmonics), -1)
     amplitudes = np.abs(coeffs)
     amplitudes[0] = 0.5 * coeffs[0].real
     return amplitudes / amplitudes[0] if normalise else amplitudes
@@ -215,36 +225,41 @@ def shape_features(
         For bad points, or when the contour does not wind around the centroid.
     """
     pts = as_contour(points, min_points=3)
-    return _features(pts, shape_descriptors(pts, closed=closed), centroid, n_harmonics)
-
-
-def _features(
-    pts: np.ndarray,
-    descriptors: ShapeDescriptors,
-    centroid: tuple[float, float] | None,
-    n_harmonics: int,
-) -> ShapeFeatures:
-    """:func:`shape_features` with the descriptors already computed."""
+    descriptors = shape_descriptors(pts, closed=closed)
     n_harmonics = max(int(n_harmonics), 3)
-    r_coeffs, star = _polar_series(pts, centroid, n_harmonics, 1)
-    rho_coeffs, _ = _polar_series(pts, centroid, n_harmonics, -2)
-    harmonics = np.abs(r_coeffs)
-    harmonics[0] = 0.5 * r_coeffs[0].real
-    harmonics /= harmonics[0]
-
-    rho_mean = 0.5 * rho_coeffs[0].real
-    kappa = min(abs(rho_coeffs[2]) / rho_mean, 1.0)  # (1/b^2 - 1/a^2) / (1/b^2 + 1/a^2)
-    rest = np.abs(np.concatenate((rho_coeffs[1:2], rho_coeffs[3:]))) / rho_mean
-    # rho is smallest along the major axis: rho_2 = -kappa * rho_mean * e^{2i psi}
-    angle = math.degrees(0.5 * np.angle(-rho_coeffs[2])) % 180.0
+    r, rho, star = _polar_series(pts, centroid, n_harmonics, n_harmonics)
+    harmonics, axis_ratio, angle, deviation = _ellipse_measures(r[None], rho[None])
     return ShapeFeatures(
-        harmonics=harmonics,
-        axis_ratio=math.sqrt((1.0 - kappa) / (1.0 + kappa)),
-        ellipse_angle=angle,
-        ellipse_deviation=float(np.sqrt(np.sum(rest**2))),
+        harmonics=harmonics[0],
+        axis_ratio=float(axis_ratio[0]),
+        ellipse_angle=float(angle[0]),
+        ellipse_deviation=float(deviation[0]),
         star_shapedness=star,
         descriptors=descriptors,
     )
+
+
+def _ellipse_measures(
+    r: np.ndarray, rho: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Normalised harmonics of ``r``, axis ratio, ellipse angle and ellipse deviation.
+
+    ``r`` and ``rho`` are (K, n + 1) complex coefficients of ``r`` and ``r^-2`` (n >= 2 for
+    ``rho``); see :class:`ShapeFeatures`.
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        harmonics = np.abs(r)
+        harmonics[:, 0] = 0.5 * r[:, 0].real
+        harmonics /= harmonics[:, :1]
+        rho_mean = 0.5 * rho[:, 0].real
+        # kappa = (1/b^2 - 1/a^2) / (1/b^2 + 1/a^2)
+        kappa = np.minimum(np.abs(rho[:, 2]) / rho_mean, 1.0)
+        rest = np.abs(np.concatenate((rho[:, 1:2], rho[:, 3:]), axis=1)) / rho_mean[:, None]
+        deviation = np.sqrt(np.sum(rest**2, axis=1))
+        axis_ratio = np.sqrt((1.0 - kappa) / (1.0 + kappa))
+    # rho is smallest along the major axis: rho_2 = -kappa * rho_mean * e^{2i psi}
+    angle = np.degrees(0.5 * np.angle(-rho[:, 2])) % 180.0
+    return harmonics, axis_ratio, angle, deviation
 
 
 def classify_shape(
@@ -303,122 +318,66 @@ def classify_shape(
     Raises
     ------
     ValueError
-        If ``points`` is not an (n, 2) finite array with at least 3 points, or ``d_alpha`` is
-        not a finite number.
+        If ``points`` is not an (n, 2) finite array with at least 3 points (2 distinct, with
+        non-negative second moments), ``d_alpha`` is not a finite number or ``centroid`` is
+        not an (x, y) pair (a non-finite centroid gives "other").
     """
-    th = thresholds or ClassifierThresholds()
     if not math.isfinite(float(d_alpha)):
         raise ValueError(f"d_alpha must be a finite angle in degrees, got {d_alpha!r}")
     pts = as_contour(points, min_points=3)
-    descriptors = shape_descriptors(pts, closed=closed)
-    if descriptors.elongation >= th.line_elongation:
-        return "line"
-    if not centroid_inside:
-        return "other"
-    try:
-        features = _features(pts, descriptors, centroid, 8)
-    except ValueError:  # the contour does not wind around the centroid
-        return "other"
-    if features.star_shapedness < th.min_star_shapedness:
-        return "other"
-    if descriptors.rectangularity >= th.rectangle_min_rectangularity:
-        return "rectangle"
-    allowance = th.raster_allowance_px / max(descriptors.semi_minor, 1e-9)
-    if features.ellipse_deviation <= th.ellipse_max_deviation + allowance:
-        return "circle" if features.axis_ratio >= th.circle_min_axis_ratio else "ellipse"
-    if (
-        features.harmonics[3] >= th.triangle_min_h3
-        and descriptors.rectangularity <= th.triangle_max_rectangularity
-    ):
-        return "triangle"
-    if d_alpha < des_threshold_deg and features.ellipse_deviation <= (
-        th.des_max_deviation + allowance
-    ):
-        return "des"
-    return "other"
+    centroids = None
+    if centroid is not None:
+        centroids = np.asarray(centroid, dtype=np.float64)
+        if centroids.shape != (2,):
+            raise ValueError(f"centroid must be an (x, y) pair, got {centroid!r}")
+    labels, status = _classify(
+        pts,
+        np.array([0, len(pts)], np.int64),
+        np.array([float(d_alpha)]),
+        np.array([bool(centroid_inside)]),
+        des_threshold_deg,
+        None if centroids is None else centroids[None],
+        thresholds or ClassifierThresholds(),
+    )
+    raise_for_status(int(status[0]), "points")
+    return labels[0]  # type: ignore[return-value]
+
+
+def _check_harmonics(n_harmonics: int) -> int:
+    if int(n_harmonics) != n_harmonics or n_harmonics < 0:
+        raise ValueError(f"n_harmonics must be an integer >= 0, got {n_harmonics!r}")
+    return int(n_harmonics)
 
 
 def _polar_series(
     points: np.ndarray,
     centroid: tuple[float, float] | None,
-    n_harmonics: int,
-    power: int,
-) -> tuple[np.ndarray, float]:
-    """Complex coefficients ``a_n + i b_n`` of ``r**power`` and the star-shapedness."""
-    if power not in (1, -2):
-        raise ValueError(f"power must be 1 or -2, got {power!r}")
-    if int(n_harmonics) != n_harmonics or n_harmonics < 0:
-        raise ValueError(f"n_harmonics must be an integer >= 0, got {n_harmonics!r}")
-    n_harmonics = int(n_harmonics)
-    pts = drop_repeated_points(as_contour(points, min_points=3), closed=True)
-    if centroid is None:
-        area, c = polygon_area_centroid(pts)
-        if area == 0.0:
-            raise ValueError("points enclose no area; polar harmonics need a closed shape")
-    else:
-        c = np.asarray(centroid, dtype=np.float64)
-        if c.shape != (2,) or not np.isfinite(c).all():
+    n_r: int,
+    n_rho: int,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Complex coefficients ``a_n + i b_n`` of ``r`` (0..n_r) and ``r^-2`` (0..n_rho), and the
+    star-shapedness, of one contour (the kernel on a batch of one; -1: no harmonics)."""
+    pts = as_contour(points, min_points=3)
+    centres = None
+    if centroid is not None:
+        centres = np.asarray(centroid, dtype=np.float64)
+        if centres.shape != (2,) or not np.isfinite(centres).all():
             raise ValueError(f"centroid must be a finite (x, y) pair, got {centroid!r}")
-
-    x0, y0 = pts[:, 0] - c[0], pts[:, 1] - c[1]
-    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
-    ex, ey = x1 - x0, y1 - y0
-    length = np.sqrt(ex * ex + ey * ey)  # (np.hypot is several times slower)
-    nx, ny = ey / length, -ex / length
-    d = x0 * nx + y0 * ny
-    flip = np.where(d < 0, -1.0, 1.0)  # make (nx, ny) point from the centroid to the edge
-    nx, ny, d = nx * flip, ny * flip, d * flip
-    scale = float(np.sqrt((x0 * x0 + y0 * y0).max()))
-    ok = d > 1e-12 * scale  # edges on a line through the centroid add nothing to int f d theta
-    if not ok.all():
-        x0, y0, x1, y1, nx, ny, d = (v[ok] for v in (x0, y0, x1, y1, nx, ny, d))
-    t0 = (y0 * nx - x0 * ny) / d  # tan(u) at both ends, u = theta - phi in (-pi/2, pi/2)
-    t1 = (y1 * nx - x1 * ny) / d
-    z0 = (1.0 + 1j * t0) / np.sqrt(1.0 + t0 * t0)  # e^{iu}
-    z1 = (1.0 + 1j * t1) / np.sqrt(1.0 + t1 * t1)
-    du = np.arctan(t1) - np.arctan(t0)  # each edge subtends less than pi
-
-    net_turn = float(du.sum())
-    winding = round(net_turn / (2.0 * math.pi))
-    if winding == 0:
+        centres = centres[None]
+    measured = measure_contours(
+        pts, np.array([0, len(pts)], np.int64), centroids=centres, n_r=int(n_r), n_rho=int(n_rho)
+    )
+    status = int(measured.series_status[0])
+    if status == _kernel.SERIES_NO_AREA:
+        raise ValueError("points enclose no area; polar harmonics need a closed shape")
+    if status == _kernel.SERIES_NO_WINDING:
+        cx, cy = measured.values["centre_x"][0], measured.values["centre_y"][0]
         raise ValueError(
-            f"the contour does not wind around the centroid ({c[0]:.6g}, {c[1]:.6g}); "
+            f"the contour does not wind around the centroid ({cx:.6g}, {cy:.6g}); "
             "polar harmonics need the centroid inside the contour"
         )
-    star_shapedness = abs(net_turn) / float(np.abs(du).sum())
-
-    # G[m] = int_{u0}^{u1} e^{imu} du for m = 0..n+2 (G[-m] = conj(G[m]))
-    g = [du.astype(complex)]
-    w0, w1 = np.ones_like(z0), np.ones_like(z1)
-    for m in range(1, n_harmonics + 3):
-        w0, w1 = w0 * z0, w1 * z1
-        g.append((w1 - w0) / (1j * m))
-    coeffs = np.empty(n_harmonics + 1, dtype=complex)
-    phase = np.ones_like(z0)  # e^{i n phi}
-    e_phi = nx + 1j * ny
-    if power == 1:
-        # int r e^{in theta} d theta = d e^{in phi} K_n, K_n = int e^{inu} / cos u du:
-        # K_0 = asinh(tan u), K_1 = u - i log(cos u), K_n = 2 G_{n-1} - K_{n-2}
-        k_prev = np.arcsinh(t1) - np.arcsinh(t0) + 0j
-        k_cur = du + 0.5j * (np.log1p(t1 * t1) - np.log1p(t0 * t0))
-        for n in range(n_harmonics + 1):
-            if n >= 2:
-                k_prev, k_cur = k_cur, 2.0 * g[n - 1] - k_prev
-            kn = k_prev if n == 0 else k_cur
-            coeffs[n] = np.dot(d, phase * kn)
-            phase = phase * e_phi
-    else:
-        # int r^-2 e^{in theta} d theta = e^{in phi} / d^2 int cos^2(u) e^{inu} du
-        #                                = e^{in phi} / d^2 (G_n / 2 + (G_{n+2} + G_{n-2}) / 4)
-        inv_d2 = 1.0 / (d * d)
-        for n in range(n_harmonics + 1):
-            g_minus = g[n - 2] if n >= 2 else np.conj(g[2 - n])
-            coeffs[n] = np.dot(inv_d2, phase * (0.5 * g[n] + 0.25 * (g[n + 2] + g_minus)))
-            phase = phase * e_phi
-
-    coeffs /= math.pi * winding
-    coeffs[0] = coeffs[0].real
-    return coeffs, star_shapedness
+    star = float(measured.values["star_shapedness"][0])
+    return measured.r[0], measured.rho[0], star
 
 
 # ------------------------------------------------------------------------- many contours
@@ -434,14 +393,16 @@ def classify_shapes(
     centroids: np.ndarray | None = None,
     thresholds: ClassifierThresholds | None = None,
 ) -> list[str | None]:
-    """:func:`classify_shape` for K contours at once, vectorised over all their points.
+    """:func:`classify_shape` for K contours at once, in one call of the shape kernel.
 
-    The same decision rule on the same features: the descriptors are those of
-    :func:`~labauto.vision.descriptors.shape_descriptors_batch` (one ``cv2.minAreaRect`` per
-    contour, everything else per-contour sums), the polar series of ``r`` (harmonics 0-3, all
-    the rule reads) and ``r^-2`` (0-8) from one pass over all edges of all contours. Results
-    equal :func:`classify_shape`'s up to floating-point rounding. (``closed`` is not an
-    argument: the label does not depend on it.)
+    The same decision rule on the same features (:func:`classify_shape` is this function on a
+    batch of one): the descriptors of
+    :func:`~labauto.vision.descriptors.shape_descriptors_batch` and, where the rule needs them
+    (not a line, centroid inside), the polar series of ``r`` (harmonics 0-3, all the rule
+    reads) and ``r^-2`` (0-8), computed per contour by
+    :func:`~labauto.vision.descriptors.measure_contours` (contours shared among threads; a
+    contour's result does not depend on the others). (``closed`` is not an argument: the label
+    does not depend on it.)
 
     Parameters
     ----------
@@ -467,162 +428,66 @@ def classify_shapes(
         ValueError (fewer than 3 points, fewer than 2 distinct ones, a non-finite point or
         ``d_alpha``).
     """
-    th = thresholds or ClassifierThresholds()
-    pts = np.asarray(points, dtype=np.float64)
-    off = np.asarray(offsets, dtype=np.int64)
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    off = np.ascontiguousarray(offsets, dtype=np.int64)
     k = len(off) - 1
     if pts.ndim != 2 or pts.shape[1] != 2:
         raise ValueError(f"points must be an (N, 2) array of (x, y), got shape {pts.shape}")
-    if off.ndim != 1 or k < 0 or off[0] != 0 or off[-1] != len(pts) or np.any(np.diff(off) < 0):
+    if off.ndim != 1 or k < 0 or off[0] != 0 or off[-1] != len(pts) or np.any(off[1:] < off[:-1]):
         raise ValueError("offsets must rise from 0 to len(points)")
     d_alpha = np.asarray(d_alpha, dtype=np.float64).reshape(k)
     inside = np.asarray(centroid_inside, dtype=bool).reshape(k)
-    labels: list[str | None] = [None] * k
-    if k == 0:
-        return labels
-    counts = np.diff(off)
-    finite_pts = np.isfinite(pts).all(axis=1)
-    usable = np.isfinite(d_alpha) & (counts >= 3)
-    if not finite_pts.all():
-        bad = np.repeat(np.arange(k), counts)[~finite_pts]
-        usable[bad] = False
-    if not usable.any():
-        return labels
-    idx = np.flatnonzero(usable)
-    if not usable.all():
-        pts = pts[np.repeat(usable, counts)]
-        off = np.concatenate(([0], np.cumsum(counts[usable])))
-    q, q_off = drop_repeated_points_batch(pts, off)
-    desc = shape_descriptors_batch(q, q_off, min_points=2)
-    label = np.full(len(idx), "", dtype=object)
-    valid = desc.valid
-    line = valid & (desc.elongation >= th.line_elongation)
-    label[line] = "line"
-    label[valid & ~line & ~inside[idx]] = "other"
-    todo = valid & ~line & inside[idx]
-    if todo.any():
-        if not todo.all():
-            q_counts = np.diff(q_off)
-            q = q[np.repeat(todo, q_counts)]
-            q_off = np.concatenate(([0], np.cumsum(q_counts[todo])))
-        if centroids is None:
-            area, centres = polygon_area_centroid_batch(q, q_off)
-            has_centre = area != 0.0  # _polar_series: "points enclose no area"
-        else:
-            centres = np.asarray(centroids, dtype=np.float64).reshape(k, 2)[idx[todo]]
-            has_centre = np.isfinite(centres).all(axis=1)
-            centres = np.where(has_centre[:, None], centres, 0.0)
-        r, rho, star, winding = _polar_series_batch(q, q_off, centres, 3, 8)
-        mean_r = 0.5 * r[:, 0].real
-        rho_mean = 0.5 * rho[:, 0].real
-        with np.errstate(divide="ignore", invalid="ignore"):
-            h3 = np.abs(r[:, 3]) / mean_r
-            kappa = np.minimum(np.abs(rho[:, 2]) / rho_mean, 1.0)
-            rest = np.abs(np.concatenate((rho[:, 1:2], rho[:, 3:]), axis=1)) / rho_mean[:, None]
-            deviation = np.sqrt(np.sum(rest**2, axis=1))
-            axis_ratio = np.sqrt((1.0 - kappa) / (1.0 + kappa))
-        rect = desc.rectangularity[todo]
-        allowance = th.raster_allowance_px / np.maximum(desc.semi_minor[todo], 1e-9)
-        ellipse_like = deviation <= th.ellipse_max_deviation + allowance
-        conditions = [
-            ~has_centre | (winding == 0) | (star < th.min_star_shapedness),
-            rect >= th.rectangle_min_rectangularity,
-            ellipse_like & (axis_ratio >= th.circle_min_axis_ratio),
-            ellipse_like,
-            (h3 >= th.triangle_min_h3) & (rect <= th.triangle_max_rectangularity),
-            (d_alpha[idx[todo]] < des_threshold_deg)
-            & (deviation <= th.des_max_deviation + allowance),
-        ]
-        choices = ["other", "rectangle", "circle", "ellipse", "triangle", "des"]
-        label[todo] = np.select(conditions, choices, default="other")
-    for j, name in zip(idx[valid].tolist(), label[valid].tolist(), strict=True):
-        labels[j] = name
-    return labels
+    if centroids is not None:
+        centroids = np.asarray(centroids, dtype=np.float64).reshape(k, 2)
+    th = thresholds or ClassifierThresholds()
+    return _classify(pts, off, d_alpha, inside, des_threshold_deg, centroids, th)[0]
 
 
-def _polar_series_batch(
-    q: np.ndarray, q_off: np.ndarray, centres: np.ndarray, n_r: int, n_rho: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_polar_series` of K polygons at once, for ``r`` and ``r^-2`` together.
-
-    ``q`` holds the polygons without repeated points (``drop_repeated_points_batch``), polygon
-    k runs around ``centres[k]``. Every edge contributes its exact integral (module
-    docstring), summed per polygon with ``np.add.reduceat``; edges on a line through the
-    centre contribute nothing. Returns the (K, n_r + 1) coefficients of ``r``, the
-    (K, n_rho + 1) coefficients of ``r^-2`` (both 0 where the winding number is 0), the
-    star-shapedness and the winding number of every polygon.
-    """
-    counts = np.diff(q_off)
-    k = len(counts)
-    starts = q_off[:-1]
-    owner = np.repeat(np.arange(k), counts)
-    nxt = np.arange(1, len(q) + 1)
-    nxt[q_off[1:] - 1] = starts  # the last vertex joins the first
-    x0, y0 = q[:, 0] - centres[owner, 0], q[:, 1] - centres[owner, 1]
-    x1, y1 = x0[nxt], y0[nxt]
-    ex, ey = x1 - x0, y1 - y0
-    length = np.sqrt(ex * ex + ey * ey)  # (np.hypot is several times slower)
-    nx, ny = ey / length, -ex / length
-    d = x0 * nx + y0 * ny
-    flip = np.where(d < 0, -1.0, 1.0)  # make (nx, ny) point from the centre to the edge
-    nx, ny, d = nx * flip, ny * flip, d * flip
-    scale = np.sqrt(np.maximum.reduceat(x0 * x0 + y0 * y0, starts))
-    ok = d > 1e-12 * scale[owner]  # edges on a line through the centre add nothing
-    d = np.where(ok, d, 1.0)
-    t0 = np.where(ok, (y0 * nx - x0 * ny) / d, 0.0)  # tan(u) at both ends
-    t1 = np.where(ok, (y1 * nx - x1 * ny) / d, 0.0)
-    sec0, sec1 = np.sqrt(1.0 + t0 * t0), np.sqrt(1.0 + t1 * t1)
-    z0, z1 = np.empty(len(q), complex), np.empty(len(q), complex)  # e^{iu}
-    z0.real, z0.imag = 1.0 / sec0, t0 / sec0
-    z1.real, z1.imag = 1.0 / sec1, t1 / sec1
-    # u1 - u0 in one arctan2: tan(u1) - tan(u0) and 1 + tan(u0) tan(u1) are sin(u1 - u0) and
-    # cos(u1 - u0) divided by cos(u0) cos(u1) > 0
-    du = np.arctan2(t1 - t0, 1.0 + t0 * t1)
-
-    net_turn = np.add.reduceat(du, starts)
-    winding = np.rint(net_turn / (2.0 * math.pi))
-    total_turn = np.add.reduceat(np.abs(du), starts)
-    star = np.abs(net_turn) / np.where(total_turn > 0, total_turn, 1.0)
-
-    # G[m] = int_{u0}^{u1} e^{imu} du, m = 0 .. max(n_r - 1, n_rho + 2)
-    g = [du.astype(complex)]
-    w0, w1 = z0.copy(), z1.copy()
-    for m in range(1, max(n_r - 1, n_rho + 2) + 1):
-        if m > 1:
-            w0 *= z0
-            w1 *= z1
-        g.append((w1 - w0) * (-1j / m))
-    e_phi = np.empty(len(q), complex)
-    e_phi.real, e_phi.imag = nx, ny
-    phases = [np.ones(len(q), complex)]  # e^{in phi}
-    for _ in range(max(n_r, n_rho)):
-        phases.append(phases[-1] * e_phi)
-
-    # r: int r e^{in theta} d theta = d e^{in phi} K_n, K_n = 2 G_{n-1} - K_{n-2}
-    r = np.empty((k, n_r + 1), complex)
-    # K_0 = asinh(t1) - asinh(t0) = log((t1 + sec1) / (t0 + sec0)), t + sec = 1 / (sec - t)
-    # without cancellation for t < 0; K_1 = du - i log(cos u) |_0^1 = du + i log(sec1 / sec0)
-    e0 = np.where(t0 >= 0, t0 + sec0, 1.0 / (sec0 - t0))
-    e1 = np.where(t1 >= 0, t1 + sec1, 1.0 / (sec1 - t1))
-    k_prev = np.log(e1 / e0) + 0j
-    k_cur = np.empty(len(q), complex)
-    k_cur.real, k_cur.imag = du, np.log(sec1 / sec0)
-    for n in range(n_r + 1):
-        if n >= 2:
-            k_prev, k_cur = k_cur, 2.0 * g[n - 1] - k_prev
-        kn = k_prev if n == 0 else k_cur
-        r[:, n] = np.add.reduceat(d * phases[n] * kn, starts)
-    # r^-2: e^{in phi} / d^2 (G_n / 2 + (G_{n+2} + G_{n-2}) / 4)
-    rho = np.empty((k, n_rho + 1), complex)
-    inv_d2 = np.where(ok, 1.0 / (d * d), 0.0)
-    for n in range(n_rho + 1):
-        g_minus = g[n - 2] if n >= 2 else np.conj(g[2 - n])
-        term = phases[n] * (0.5 * g[n] + 0.25 * (g[n + 2] + g_minus))
-        rho[:, n] = np.add.reduceat(inv_d2 * term, starts)
-
-    norm = np.where(winding != 0, math.pi * winding, np.inf)[:, None]
-    r /= norm
-    rho /= norm
-    r[:, 0] = r[:, 0].real
-    rho[:, 0] = rho[:, 0].real
-    return r, rho, star, winding
+def _classify(
+    pts: np.ndarray,
+    off: np.ndarray,
+    d_alpha: np.ndarray,
+    inside: np.ndarray,
+    des_threshold_deg: float,
+    centroids: np.ndarray | None,
+    th: ClassifierThresholds,
+) -> tuple[list[str | None], np.ndarray]:
+    """The decision rule of :func:`classify_shape` on K checked contours: one kernel call for
+    the descriptors and, where the label needs them (not a line, centroid inside), the polar
+    series of ``r`` (harmonics 0-3, all the rule reads) and ``r^-2`` (0-8). Returns the labels
+    (None where the descriptors do not exist or ``d_alpha`` is not finite) and the descriptor
+    status of every contour."""
+    finite = np.isfinite(d_alpha)
+    measured = measure_contours(
+        pts,
+        off,
+        series=inside & finite,
+        centroids=centroids,
+        max_elongation=th.line_elongation,
+        n_r=3,
+        n_rho=8,
+    )
+    v = measured.values
+    valid = (measured.status == _kernel.OK) & finite
+    line = v["elongation"] >= th.line_elongation
+    rect = v["rectangularity"]
+    harmonics, axis_ratio, _, deviation = _ellipse_measures(measured.r, measured.rho)
+    allowance = th.raster_allowance_px / np.maximum(v["semi_minor"], 1e-9)
+    ellipse_like = deviation <= th.ellipse_max_deviation + allowance
+    conditions = [
+        line,
+        ~inside
+        | (measured.series_status != _kernel.SERIES_OK)  # no centre, or it is outside
+        | (v["star_shapedness"] < th.min_star_shapedness),
+        rect >= th.rectangle_min_rectangularity,
+        ellipse_like & (axis_ratio >= th.circle_min_axis_ratio),
+        ellipse_like,
+        (harmonics[:, 3] >= th.triangle_min_h3) & (rect <= th.triangle_max_rectangularity),
+        (d_alpha < des_threshold_deg) & (deviation <= th.des_max_deviation + allowance),
+    ]
+    # label index into SHAPE_LABELS: first matching condition
+    choices = [5, 6, 4, 0, 1, 3, 2]  # line, other, rectangle, circle, ellipse, triangle, des
+    code = np.select(conditions, choices, default=6)
+    code[~valid] = -1
+    labels = [None if c < 0 else SHAPE_LABELS[c] for c in code.tolist()]
+    return labels, measured.status

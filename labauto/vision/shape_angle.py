@@ -1,4 +1,4 @@
-"""The shape angle D_alpha of Teutsch et al. (section 3.2, eq. 3), vectorised over contours.
+"""The shape angle D_alpha of Teutsch et al. (section 3.2, eq. 3) of all contours of an image.
 
 For every contour point ``p_i`` with image gradient ``g_i`` and vector ``m_i = c - p_i`` to the
 contour's centre of gravity ``c``, the deviation angle is
@@ -23,8 +23,9 @@ Choices (the paper is silent or ambiguous on these):
 * **Gaps.** An open contour is a DES only if at most ``DEFAULT_MAX_GAP_FRACTION`` (0.25) of its
   outline is missing (chord between its ends over length plus chord); the paper's method works
   "even if the contour is open up to 15%".
-* **Statistic.** The median (the paper's robust choice, O(n) per contour by selection with
-  ``numpy.partition``) and the mean are both returned; a DES uses the median by default.
+* **Statistic.** The median (the paper's robust choice, O(n) per contour by selection) and the
+  mean are both returned; a DES uses the median by default. The median of an even count is the
+  mean of the two middle values.
 * **Points with no direction** (zero gradient, or the point coincides with the centroid) are
   given alpha = 90 degrees (the least circular value), so they can never make a shape look rounder.
 
@@ -38,6 +39,10 @@ with artefacts at 70-89 degrees. So 60 degrees keeps every ellipse down to 1:4 w
 margin for rasterisation and noise and rejects lines and ragged artefacts. Like the paper's rule
 it does not reject squares, triangles or 5-point stars whose centroid is inside (D_alpha 27-52);
 the harmonic shape label tells those apart (the paper: "the square itself seems to be a problem").
+
+The loops over points are one compiled call per image for all contours
+(:mod:`labauto.vision.kernels.shape_angle`: quickselect for the medians, numpy's summation order
+for the sums, so the results equal the formulas above evaluated with numpy).
 """
 
 from __future__ import annotations
@@ -45,6 +50,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from labauto.vision.kernels import shape_angle as _kernel
 
 #: An open contour's chord-closed polygon gives the centroid when its area exceeds this times
 #: the mean squared distance of the points from their mean; otherwise the points' mean does.
@@ -115,14 +122,40 @@ class ShapeAngles:
         raise ValueError(f"statistic must be 'median' or 'mean', got {name!r}")
 
 
-def _segment_ids(offsets: np.ndarray) -> np.ndarray:
-    return np.repeat(np.arange(offsets.shape[0] - 1), np.diff(offsets))
-
-
 def _closed_from_ends(points: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     first = np.rint(points[offsets[:-1]])
     last = np.rint(points[offsets[1:] - 1])
     return np.all(np.abs(first - last) <= 1, axis=1) & (np.diff(offsets) > 2)
+
+
+def _points(points: object, name: str = "points") -> np.ndarray:
+    """``points`` as a C-contiguous (N, 2) float64 array; ValueError naming it otherwise."""
+    out = np.ascontiguousarray(points, dtype=np.float64)
+    if out.ndim != 2 or out.shape[1] != 2:
+        raise ValueError(f"{name} must be (N, 2), got shape {out.shape}")
+    return out
+
+
+def _offsets(offsets: object) -> np.ndarray:
+    """``offsets`` as a C-contiguous int64 array; the kernel checks the values."""
+    out = np.ascontiguousarray(offsets, dtype=np.int64)
+    if out.ndim != 1 or out.shape[0] < 1:
+        raise ValueError("offsets must start at 0 and end at len(points)")
+    return out
+
+
+def _closed(closed: np.ndarray | None, points: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """(K,) uint8 view of the closed flags (default: the ends are 8-neighbours)."""
+    if closed is None:
+        if offsets[0] != 0 or offsets[-1] != points.shape[0] or np.any(np.diff(offsets) < 1):
+            return np.zeros(offsets.shape[0] - 1, np.uint8)  # the kernel rejects the offsets
+        closed = _closed_from_ends(points, offsets)
+    flags = np.ascontiguousarray(closed, dtype=bool)
+    if flags.shape != (offsets.shape[0] - 1,):
+        raise ValueError(
+            f"closed must have one entry per contour ({offsets.shape[0] - 1}), got {flags.shape}"
+        )
+    return flags.view(np.uint8)
 
 
 def polygon_centroids(
@@ -149,31 +182,32 @@ def polygon_centroids(
     area : np.ndarray
         (K,) absolute polygon area (open contours closed by their chord).
     """
-    points = np.asarray(points, dtype=np.float64)
-    offsets = np.asarray(offsets, dtype=np.int64)
-    if closed is None:
-        closed = _closed_from_ends(points, offsets)
-    starts = offsets[:-1]
-    counts = np.diff(offsets)
-    seg = _segment_ids(offsets)
-    mean = np.add.reduceat(points, starts, axis=0) / counts[:, None]
-    rel = points - mean[seg]  # centred, for numerical stability
-    nxt = np.arange(1, points.shape[0] + 1)
-    nxt[offsets[1:] - 1] = starts  # last point joins the first (the chord for open contours)
-    x, y = rel[:, 0], rel[:, 1]
-    xn, yn = x[nxt], y[nxt]
-    cross = x * yn - xn * y
-    twice_area = np.add.reduceat(cross, starts)
-    cx = np.add.reduceat((x + xn) * cross, starts)
-    cy = np.add.reduceat((y + yn) * cross, starts)
-    spread = np.add.reduceat(x * x + y * y, starts) / counts
-    # open contours: the chord-closed polygon if it encloses a real area (a disk has
-    # area / spread = pi, a straight line 0), else the points' mean
-    min_ratio = np.where(closed, 1e-6, OPEN_MIN_AREA_RATIO)
-    usable = np.abs(twice_area) / 2.0 > min_ratio * spread
-    safe = np.where(usable, 3.0 * twice_area, 1.0)
-    offset = np.where(usable[:, None], np.column_stack((cx / safe, cy / safe)), 0.0)
-    return mean + offset, np.abs(twice_area) / 2.0
+    centroid, area, _ = _geometry(points, offsets, closed)
+    return centroid, area
+
+
+def gap_fractions(
+    points: np.ndarray, offsets: np.ndarray, closed: np.ndarray | None = None
+) -> np.ndarray:
+    """(K,) missing share of each outline: chord / (length along the points + chord).
+
+    0 for closed contours; about the missing fraction of the perimeter for a convex shape with
+    one gap (a chord is a little shorter than the arc it replaces).
+    """
+    return _geometry(points, offsets, closed)[2]
+
+
+def _geometry(
+    points: np.ndarray, offsets: np.ndarray, closed: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centroids (K, 2), areas (K,) and gap fractions (K,), one kernel call."""
+    points = _points(points)
+    offsets = _offsets(offsets)
+    flags = _closed(closed, points, offsets)
+    k = offsets.shape[0] - 1
+    centroid, area, gap = np.empty((k, 2)), np.empty(k), np.empty(k)
+    _kernel.polygon_centroids(points, offsets, flags, OPEN_MIN_AREA_RATIO, centroid, area, gap)
+    return centroid, area, gap
 
 
 def points_in_polygons(query: np.ndarray, points: np.ndarray, offsets: np.ndarray) -> np.ndarray:
@@ -194,52 +228,12 @@ def points_in_polygons(query: np.ndarray, points: np.ndarray, offsets: np.ndarra
     np.ndarray
         (K,) bool.
     """
-    points = np.asarray(points, dtype=np.float64)
-    offsets = np.asarray(offsets, dtype=np.int64)
-    k = offsets.shape[0] - 1
-    seg = _segment_ids(offsets)
-    nxt = np.arange(1, points.shape[0] + 1)
-    nxt[offsets[1:] - 1] = offsets[:-1]
-    qx, qy = query[seg, 0], query[seg, 1]
-    x0, y0 = points[:, 0], points[:, 1]
-    x1, y1 = x0[nxt], y0[nxt]
-    straddles = (y0 > qy) != (y1 > qy)
-    dy = np.where(straddles, y1 - y0, 1.0)
-    x_cross = x0 + (qy - y0) * (x1 - x0) / dy
-    hits = straddles & (qx < x_cross)
-    return (np.bincount(seg, weights=hits, minlength=k) % 2).astype(bool)
-
-
-def deviation_angles(
-    points: np.ndarray, gradients: np.ndarray, centroids: np.ndarray, seg: np.ndarray
-) -> np.ndarray:
-    """alpha_i in degrees, in [0, 90]: angle between gradient and vector to the centroid.
-
-    Polarity invariant (``|cos|``). Points with a zero gradient or at the centroid get 90.
-    """
-    m = centroids[seg] - points
-    g = np.asarray(gradients, dtype=np.float64)
-    dot = np.abs(g[:, 0] * m[:, 0] + g[:, 1] * m[:, 1])
-    norm = np.hypot(g[:, 0], g[:, 1]) * np.hypot(m[:, 0], m[:, 1])
-    cos = np.divide(dot, norm, out=np.zeros_like(dot), where=norm > 0)
-    return np.degrees(np.arccos(np.minimum(cos, 1.0)))
-
-
-def segment_medians(values: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Median of each segment ``values[offsets[k]:offsets[k+1]]`` by selection (O(n) each).
-
-    Uses ``numpy.partition`` per segment (a short loop over segments, none over points); the
-    median of an even count is the mean of the two middle values.
-    """
-    k = offsets.shape[0] - 1
-    out = np.empty(k)
-    for i in range(k):
-        chunk = values[offsets[i] : offsets[i + 1]]
-        n = chunk.shape[0]
-        lo, hi = (n - 1) // 2, n // 2
-        part = np.partition(chunk, (lo, hi)) if hi != lo else np.partition(chunk, lo)
-        out[i] = 0.5 * (part[lo] + part[hi])
-    return out
+    points = _points(points)
+    offsets = _offsets(offsets)
+    query = _points(query, "query")
+    inside = np.empty(offsets.shape[0] - 1, np.uint8)
+    _kernel.points_in_polygons(query, points, offsets, inside)
+    return inside.view(bool)
 
 
 def shape_angles(
@@ -265,54 +259,44 @@ def shape_angles(
     Returns
     -------
     ShapeAngles
+
+    Raises
+    ------
+    ValueError
+        If points and gradients are not both (N, 2), the offsets do not split the points into
+        non-empty contours, ``closed`` is not (K,), or a point or gradient is not finite.
     """
-    points = np.asarray(points, dtype=np.float64)
-    offsets = np.asarray(offsets, dtype=np.int64)
+    points = np.ascontiguousarray(points, dtype=np.float64)
     gradients = np.asarray(gradients)
+    if gradients.dtype != np.float32:
+        gradients = np.asarray(gradients, dtype=np.float64)
+    gradients = np.ascontiguousarray(gradients)
     if points.ndim != 2 or points.shape[1] != 2 or gradients.shape != points.shape:
         raise ValueError(
             f"points and gradients must both be (N, 2), got {points.shape} and {gradients.shape}"
         )
-    if offsets.ndim != 1 or offsets.shape[0] < 1 or offsets[0] != 0 or offsets[-1] != len(points):
-        raise ValueError("offsets must start at 0 and end at len(points)")
-    counts = np.diff(offsets)
-    if np.any(counts < 1):
-        raise ValueError("every contour needs at least one point")
-    k = counts.shape[0]
-    if k == 0:
-        empty = np.empty(0)
-        return ShapeAngles(np.empty((0, 2)), empty, empty, np.empty(0, bool), empty, empty)
-    if closed is None:
-        closed = _closed_from_ends(points, offsets)
-    centroid, area = polygon_centroids(points, offsets, np.asarray(closed, bool))
-    seg = _segment_ids(offsets)
-    alpha = deviation_angles(points, gradients, centroid, seg)
-    mean = np.bincount(seg, weights=alpha, minlength=k) / counts
-    median = segment_medians(alpha, offsets)
-    inside = points_in_polygons(centroid, points, offsets)
-    return ShapeAngles(centroid, mean, median, inside, area, gap_fractions(points, offsets, closed))
-
-
-def gap_fractions(
-    points: np.ndarray, offsets: np.ndarray, closed: np.ndarray | None = None
-) -> np.ndarray:
-    """(K,) missing share of each outline: chord / (length along the points + chord).
-
-    0 for closed contours; about the missing fraction of the perimeter for a convex shape with
-    one gap (a chord is a little shorter than the arc it replaces).
-    """
-    points = np.asarray(points, dtype=np.float64)
-    offsets = np.asarray(offsets, dtype=np.int64)
-    if closed is None:
-        closed = _closed_from_ends(points, offsets)
-    steps = np.hypot(*np.diff(points, axis=0).T)
-    steps = np.append(steps, 0.0)
-    steps[offsets[1:] - 1] = 0.0  # no step from a contour's last point to the next contour
-    length = np.add.reduceat(steps, offsets[:-1])
-    chord = np.hypot(*(points[offsets[1:] - 1] - points[offsets[:-1]]).T)
-    total = length + chord
-    frac = np.divide(chord, total, out=np.zeros_like(chord), where=total > 0)
-    return np.where(closed, 0.0, frac)
+    offsets = _offsets(offsets)
+    flags = _closed(closed, points, offsets)
+    k = offsets.shape[0] - 1
+    centroid = np.empty((k, 2))
+    mean, median, area, gap = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
+    inside = np.empty(k, np.uint8)
+    scratch = np.empty(points.shape[0])
+    _kernel.shape_angles(
+        points,
+        gradients,
+        offsets,
+        flags,
+        OPEN_MIN_AREA_RATIO,
+        centroid,
+        mean,
+        median,
+        inside,
+        area,
+        gap,
+        scratch,
+    )
+    return ShapeAngles(centroid, mean, median, inside.view(bool), area, gap)
 
 
 def shape_angle(

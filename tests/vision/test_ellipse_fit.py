@@ -341,3 +341,300 @@ def test_errors_name_the_problem() -> None:
 def test_fit_result_type() -> None:
     fit = fit_ellipse_geometric(TRUTHS[0].sample(30))
     assert isinstance(fit, EllipseFit) and fit.inliers is None and fit.iterations >= 1
+
+
+# ------------------------------------------------- compiled kernel vs plain references
+
+
+def ref_contact(
+    u: np.ndarray, v: np.ndarray, a: float, b: float, guess: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The documented contact-point iteration, point by point in plain Python."""
+    big, small = max(a, b), min(a, b)
+    a2, b2 = big * big, small * small
+    out = []
+    for i, (pu, pv) in enumerate(zip(u.tolist(), v.tolist(), strict=True)):
+        x, y = (abs(pv), abs(pu)) if a < b else (abs(pu), abs(pv))
+        inner = y == 0 and big * x <= a2 - b2
+        x_inner = x
+        if inner:
+            x = big
+        ax, by = big * x, small * y
+
+        def newton(s: float, ax: float = ax, by: float = by) -> float:
+            ra, rb = ax / (s + a2), by / (s + b2)
+            return (ra * ra + rb * rb - 1.0) / (2.0 * (ra * ra / (s + a2) + rb * rb / (s + b2)))
+
+        safe = max(by - b2, ax - a2)
+        if guess is None:
+            qx, qy = x / a2, y / b2
+            den = qx * qx + qy * qy  # 0 only for a point next to the centre (-inf: IEEE)
+            start = 0.5 * (x * qx + y * qy - 1.0) / den if den > 0 else -math.inf
+        else:
+            start = float(guess[i])
+        s = max(start, safe)
+        s = max(s + newton(s), safe)
+        for _ in range(60):
+            step = newton(s)
+            s += step
+            if not abs(step) > 1e-9 * (abs(s) + b2):
+                break
+        if inner:
+            cu = a2 * x_inner / (a2 - b2) if big > small else 0.0
+            cv = small * math.sqrt(min(max(1.0 - (cu / big) ** 2, 0.0), 1.0))
+            s = -b2
+        else:
+            cu, cv = a2 * x / (s + a2), b2 * y / (s + b2)
+        if a < b:
+            cu, cv = cv, cu
+        out.append((math.copysign(cu, pu), math.copysign(cv, pv), s))
+    cu_all, cv_all, s_all = np.array(out).reshape(-1, 3).T
+    return cu_all, cv_all, s_all
+
+
+def ref_geometric(
+    pts: np.ndarray, start: Ellipse, max_iter: int = 50, tol: float = 1e-9
+) -> tuple[Ellipse, float, int, bool]:
+    """The documented Levenberg-Marquardt (numpy normal equations, plain contact points)."""
+    p = np.array([*start.center, *start.axes, math.radians(start.angle)])
+
+    def evaluate(p: np.ndarray, guess: np.ndarray | None) -> tuple:
+        xc, yc, a, b, t = p
+        c, s = math.cos(t), math.sin(t)
+        dx, dy = pts[:, 0] - xc, pts[:, 1] - yc
+        u, v = c * dx + s * dy, c * dy - s * dx
+        fu, fv, roots = ref_contact(u, v, a, b, guess)
+        nu, nv = fu / a**2, fv / b**2
+        norm = np.hypot(nu, nv)
+        nu, nv = nu / norm, nv / norm
+        d = nu * (u - fu) + nv * (v - fv)
+        jac = np.column_stack(
+            (s * nv - c * nu, -(s * nu + c * nv), -nu * fu / a, -nv * fv / b, nu * fv - nv * fu)
+        )
+        return d, jac, roots
+
+    d, jac, roots = evaluate(p, None)
+    cost = float(d @ d)
+    lam, iterations, converged, active = 0.0, 0, False, max_iter > 0
+    while active:
+        iterations += 1
+        hess = jac.T @ jac
+        diag = np.diag(hess).copy()
+        hess[np.diag_indices(5)] += lam * diag + 1e-12 * diag.sum()
+        step = -np.linalg.solve(hess, jac.T @ d)
+        size = max(p[2], p[3], 1.0)
+        step_px = math.sqrt(float(step[:4] @ step[:4]) + (size * step[4]) ** 2)
+        trial = p + step
+        cost_t = math.inf
+        if np.isfinite(trial).all() and trial[2] > 0 and trial[3] > 0:
+            d_t, jac_t, roots_t = evaluate(trial, roots)
+            cost_t = float(d_t @ d_t)
+        small_step = step_px <= tol * size
+        accept = cost_t <= cost
+        small_gain = accept and lam == 0 and cost - cost_t <= tol * cost
+        if accept:
+            p, cost, d, jac, roots = trial, cost_t, d_t, jac_t, roots_t
+            lam = 0.0 if lam <= 1e-6 else lam / 10
+        elif not small_step:
+            lam = 1e-3 if lam == 0 else lam * 10
+        done = (accept and (small_step or small_gain)) or (not accept and small_step)
+        converged = converged or done
+        active = not done and lam <= 1e12 and iterations < max_iter
+    fit = Ellipse.normalised(p[0], p[1], p[2], p[3], math.degrees(p[4]))
+    return fit, math.sqrt(cost / len(pts)), iterations, converged
+
+
+def ref_algebraic(pts: np.ndarray) -> Ellipse:
+    """Halir-Flusser with design matrices and np.linalg.eig; the conic's centre and axes from
+    the 2x2 quadratic form's eigen-decomposition (not the kernel's closed form)."""
+    mean = pts.mean(axis=0)
+    centred = pts - mean
+    scale = math.sqrt(float((centred**2).sum()) / (2 * len(pts)))
+    x, y = centred[:, 0] / scale, centred[:, 1] / scale
+    d1 = np.column_stack((x * x, x * y, y * y))
+    d2 = np.column_stack((x, y, np.ones_like(x)))
+    s1, s2, s3 = d1.T @ d1, d1.T @ d2, d2.T @ d2
+    t = -np.linalg.solve(s3, s2.T)
+    m = s1 + s2 @ t
+    _, vecs = np.linalg.eig(np.array([m[2] / 2, -m[1], m[0] / 2]))
+    vecs = vecs.real
+    a1 = vecs[:, np.argmax(4 * vecs[0] * vecs[2] - vecs[1] ** 2)]
+    qa, qb, qc, qd, qe, qf = np.concatenate((a1, t @ a1))
+    quad = np.array([[qa, qb / 2], [qb / 2, qc]])
+    centre = np.linalg.solve(2 * quad, [-qd, -qe])
+    f0 = qf + 0.5 * (qd * centre[0] + qe * centre[1])
+    w, vec = np.linalg.eigh(quad / -f0)  # ascending: the major axis first
+    angle = math.degrees(math.atan2(vec[1, 0], vec[0, 0]))
+    return Ellipse.normalised(
+        *(mean + scale * centre), scale / math.sqrt(w[0]), scale / math.sqrt(w[1]), angle
+    )
+
+
+def assert_same_ellipse(e1: Ellipse, e2: Ellipse, px: float) -> None:
+    """Centre, axes and (angle times a - b, the displacement it causes) within ``px``."""
+    assert math.dist(e1.center, e2.center) <= px, (e1, e2)
+    assert np.abs(np.subtract(e1.axes, e2.axes)).max() <= px, (e1, e2)
+    assert math.radians(angle_diff(e1.angle, e2.angle)) * (e1.axes[0] - e1.axes[1]) <= px
+
+
+def reference_cases() -> list[np.ndarray]:
+    gen = np.random.default_rng(21)
+    cases = [t.sample(40, 0.2, 5.0) for t in TRUTHS]  # exact arcs
+    for truth, arc, sigma in ((TRUTHS[0], 360, 0.3), (TRUTHS[1], 200, 0.5), (TRUTHS[2], 150, 0.2)):
+        pts = truth.sample(50, 1.0, 1.0 + math.radians(arc))
+        cases.append(pts + gen.normal(0.0, sigma, pts.shape))
+    cases.append(np.round(Ellipse((30.3, 20.7), (14.0, 9.0), 35.0).sample(60)))  # pixel grid
+    return cases
+
+
+def test_contact_points_equal_the_plain_iteration() -> None:
+    gen = np.random.default_rng(12)
+    u = np.concatenate((gen.uniform(-90, 90, 150), [0.0, 3.0, -3.0, 0.0, 45.0, 0.0, 1e-9, 3.0]))
+    v = np.concatenate((gen.uniform(-60, 60, 150), [0.0, 0.0, 0.0, 2.0, 0.0, -30.0, 0.0, 1e-9]))
+    for a, b in ((40.0, 25.0), (25.0, 40.0), (30.0, 30.0), (50.0, 0.5)):
+        cu, cv = contact_points(u, v, a, b)
+        ref_u, ref_v, _ = ref_contact(u, v, a, b)
+        assert np.allclose(cu, ref_u, rtol=0, atol=1e-11 * max(a, b))
+        assert np.allclose(cv, ref_v, rtol=0, atol=1e-11 * max(a, b))
+    # any array shape, broadcast like numpy; nothing in, nothing out
+    cu, cv = contact_points(np.full((2, 3), 50.0), np.zeros(3), 40.0, 25.0)
+    assert cu.shape == cv.shape == (2, 3)
+    assert np.allclose(cu, 40.0, rtol=0, atol=1e-12) and np.all(cv == 0.0)
+    assert contact_points(np.zeros(0), np.zeros(0), 2.0, 1.0)[0].shape == (0,)
+    with pytest.raises(ValueError, match="semi-axes"):
+        contact_points(u, v, 0.0, 1.0)
+
+
+def test_orthogonal_distances_equal_the_plain_iteration() -> None:
+    e = Ellipse((12.0, -4.0), (30.0, 12.0), 112.0)
+    gen = np.random.default_rng(13)
+    pts = np.concatenate((gen.uniform(-40, 60, (100, 2)), [[12.0, -4.0]]))  # and the centre
+    t = math.radians(e.angle)
+    dx, dy = pts[:, 0] - 12.0, pts[:, 1] + 4.0
+    u, v = math.cos(t) * dx + math.sin(t) * dy, math.cos(t) * dy - math.sin(t) * dx
+    fu, fv, _ = ref_contact(u, v, 30.0, 12.0)
+    outward = np.sign((fu / 900.0) * (u - fu) + (fv / 144.0) * (v - fv))
+    expected = outward * np.hypot(u - fu, v - fv)
+    assert np.allclose(orthogonal_distances(pts, e), expected, rtol=0, atol=1e-10)
+    assert orthogonal_distances(pts[-1], e)[0] == pytest.approx(-12.0)  # centre: minor axis
+    assert orthogonal_distances(np.zeros((0, 2)), e).shape == (0,)
+
+
+@pytest.mark.parametrize("case", range(8))
+def test_algebraic_fit_equals_the_plain_reference(case: int) -> None:
+    pts = reference_cases()[case]
+    ours = fit_ellipse_algebraic(pts)
+    assert_same_ellipse(ours, ref_algebraic(pts), 1e-9 * ours.axes[0])
+    row = fit_ellipses_algebraic_batch(pts, np.array([0, len(pts)]))[0]
+    assert Ellipse.normalised(*row) == ours  # the same kernel
+
+
+@pytest.mark.parametrize("case", range(8))
+@pytest.mark.parametrize("max_iter", [50, 5, 1, 0])
+def test_geometric_fit_equals_the_plain_reference(case: int, max_iter: int) -> None:
+    pts = reference_cases()[case]
+    start = fit_ellipse_algebraic(pts)
+    fit = fit_ellipse_geometric(pts, max_iter=max_iter, tol=1e-9 if max_iter == 50 else 1e-5)
+    ref, rms, iterations, converged = ref_geometric(
+        pts, start, max_iter, 1e-9 if max_iter == 50 else 1e-5
+    )
+    assert_same_ellipse(fit.ellipse, ref, 1e-9)
+    assert fit.rms == pytest.approx(rms, rel=1e-9, abs=1e-12)
+    assert (fit.iterations, fit.converged) == (iterations, converged)
+    if max_iter == 0:
+        assert fit.ellipse == start and fit.iterations == 0 and not fit.converged
+
+
+def test_geometric_fit_from_special_starts_equals_the_reference() -> None:
+    # a circle's points from an elongated start; points through the centre of the start
+    # (the contact point on the major axis inside the evolute); a start with a < b
+    circle = TRUTHS[3].sample(30)
+    through_centre = np.concatenate((TRUTHS[0].sample(30), [TRUTHS[0].center]))
+    for pts, start in (
+        (circle, Ellipse((1.0, -1.0), (35.0, 20.0), 10.0)),
+        (through_centre, Ellipse((123.4, 56.7), (41.0, 24.0), 30.0)),
+        (TRUTHS[1].sample(40), Ellipse((10.0, -5.0), (15.0, 79.0), 80.0)),
+    ):
+        fit = fit_ellipse_geometric(pts, start)
+        ref, rms, iterations, converged = ref_geometric(pts, start)
+        assert_same_ellipse(fit.ellipse, ref, 1e-9)
+        assert fit.rms == pytest.approx(rms, rel=1e-9, abs=1e-12)
+        assert (fit.iterations, fit.converged) == (iterations, converged)
+
+
+def test_batch_edge_cases() -> None:
+    # nothing at all; only unusable contours; one contour
+    assert fit_ellipses_geometric_batch(np.zeros((0, 2)), np.array([0])) == []
+    assert fit_ellipses_geometric_batch(np.zeros((0, 2)), np.array([0, 0, 0])) == [None, None]
+    assert np.isnan(fit_ellipses_algebraic_batch(np.zeros((0, 2)), np.array([0, 0]))).all()
+    same = np.ones((7, 2))  # one distinct point
+    line = np.column_stack((np.arange(8.0), np.arange(8.0)))
+    pts = np.concatenate((same, line))
+    assert fit_ellipses_geometric_batch(pts, np.array([0, 7, 15])) == [None, None]
+    five = Ellipse((3.0, 4.0), (6.0, 2.0), 20.0).sample(5)  # exactly 5 points: exact fit
+    (fit,) = fit_ellipses_geometric_batch(five, np.array([0, 5]))
+    assert fit is not None and fit.n_inliers == 5 and fit.rms < 1e-9
+    assert_close(fit.ellipse, Ellipse((3.0, 4.0), (6.0, 2.0), 20.0), center=1e-8, axes=1e-8)
+    # far from the origin (large coordinates), negative coordinates
+    for centre in ((1e5, 2e5), (-300.0, -45.5)):
+        truth = Ellipse(centre, (25.0, 18.0), 60.0)
+        (fit,) = fit_ellipses_geometric_batch(truth.sample(40), np.array([0, 40]))
+        assert fit is not None
+        assert_close(fit.ellipse, truth, center=1e-6, axes=1e-6, angle=1e-5)
+    # bad initial rows are None, the good ones fitted
+    exact = np.concatenate([t.sample(30) for t in TRUTHS[:3]])
+    rows = np.array(
+        [[*TRUTHS[0].center, 40.0, 25.0, 33.0], [0.0, 0.0, np.nan, 1.0, 0.0], [0, 0, 5, -1, 0]]
+    )
+    fits = fit_ellipses_geometric_batch(exact, np.arange(4) * 30, rows)
+    assert fits[0] is not None and fits[1] is None and fits[2] is None
+    with pytest.raises(ValueError, match="max_iter"):
+        fit_ellipses_geometric_batch(exact, np.arange(4) * 30, max_iter=-1)
+    with pytest.raises(ValueError, match="offsets"):
+        fit_ellipses_geometric_batch(exact, np.array([0, 30, 20, 90]))
+    with pytest.raises(ValueError, match="NaN"):
+        fit_ellipses_geometric_batch(np.full((5, 2), np.inf), np.array([0, 5]))
+
+
+def test_big_batch_equals_one_by_one_fits_exactly() -> None:
+    # large enough to be shared among threads; every contour's fit is the single fit, bit
+    # for bit, whatever else is in the batch
+    gen = np.random.default_rng(14)
+    contours = []
+    for _ in range(40):
+        a = gen.uniform(8, 60)
+        truth = Ellipse(
+            (gen.uniform(0, 1000), gen.uniform(0, 800)), (a, a * gen.uniform(0.3, 1)), 47.0
+        )
+        start = gen.uniform(0, 2 * np.pi)
+        pts = truth.sample(int(gen.integers(5, 200)), start, start + gen.uniform(1.5, 6.3))
+        contours.append(pts + gen.normal(0, 0.4, pts.shape))
+    contours[7] = contours[7][:3]
+    offsets = np.concatenate(([0], np.cumsum([len(c) for c in contours])))
+    assert offsets[-1] > 3000
+    fits = fit_ellipses_geometric_batch(np.concatenate(contours), offsets, max_iter=5, tol=1e-5)
+    rows = fit_ellipses_algebraic_batch(np.concatenate(contours), offsets)
+    for k, (fit, pts) in enumerate(zip(fits, contours, strict=True)):
+        if k == 7:
+            assert fit is None and np.isnan(rows[k]).all()
+            continue
+        assert fit == fit_ellipse_geometric(pts, max_iter=5, tol=1e-5)
+        assert fit is not None and fit.rms == fit_ellipse_geometric(pts, max_iter=5, tol=1e-5).rms
+        assert Ellipse.normalised(*rows[k]) == fit_ellipse_algebraic(pts)
+
+
+def test_any_memory_layout_is_accepted() -> None:
+    pts = TRUTHS[0].sample(40)
+    fit = fit_ellipse_geometric(pts)
+    for other in (pts.reshape(-1, 1, 2), np.asfortranarray(pts), pts.astype(np.float32)):
+        assert (
+            fit_ellipse_geometric(other).ellipse
+            == fit_ellipse_geometric(other.astype(np.float64)).ellipse
+        )
+    assert fit_ellipse_geometric(pts.reshape(-1, 1, 2)) == fit
+    assert fit_ellipse_algebraic(np.asfortranarray(pts)) == fit_ellipse_algebraic(pts)
+    wide = np.zeros((40, 4))
+    wide[:, ::2] = pts
+    assert orthogonal_distances(wide[:, ::2], fit.ellipse) == pytest.approx(0.0, abs=1e-9)
+    rows = fit_ellipses_algebraic_batch(np.asfortranarray(pts), np.array([0, 40], np.int32))
+    assert Ellipse.normalised(*rows[0]) == fit_ellipse_algebraic(pts)

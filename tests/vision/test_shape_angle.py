@@ -11,6 +11,9 @@ at all sizes tested.
 
 from __future__ import annotations
 
+import math
+import statistics
+
 import numpy as np
 import pytest
 from vision_helpers import analytic_d_alpha, largest, render_alone
@@ -18,6 +21,8 @@ from vision_helpers import analytic_d_alpha, largest, render_alone
 from labauto.synthetic import shapes
 from labauto.vision.detector import DetectorParams, detect
 from labauto.vision.shape_angle import (
+    OPEN_MIN_AREA_RATIO,
+    gap_fractions,
     points_in_polygons,
     polygon_centroids,
     shape_angle,
@@ -173,3 +178,234 @@ def test_bad_input_is_rejected() -> None:
         shape_angles(np.zeros((5, 2)), np.zeros((4, 2)), np.array([0, 5]))
     with pytest.raises(ValueError, match="offsets"):
         shape_angles(np.zeros((5, 2)), np.zeros((5, 2)), np.array([0, 4]))
+
+
+# --- the compiled kernel against a plain-Python reference ---------------------------------------
+
+
+def _reference(pts: np.ndarray, grads: np.ndarray, closed: bool) -> dict:
+    """Eq. 3 and the module's choices for one contour, written out in plain Python."""
+    n = len(pts)
+    xs, ys = [float(v) for v in pts[:, 0]], [float(v) for v in pts[:, 1]]
+    mx, my = math.fsum(xs) / n, math.fsum(ys) / n
+    rx, ry = [x - mx for x in xs], [y - my for y in ys]
+    twice_area = cx = cy = spread = 0.0
+    for i in range(n):
+        j = (i + 1) % n
+        cross = rx[i] * ry[j] - rx[j] * ry[i]
+        twice_area += cross
+        cx += (rx[i] + rx[j]) * cross
+        cy += (ry[i] + ry[j]) * cross
+        spread += rx[i] ** 2 + ry[i] ** 2
+    ratio = 1e-6 if closed else OPEN_MIN_AREA_RATIO
+    if abs(twice_area) / 2 > ratio * spread / n:
+        centroid = (mx + cx / (3 * twice_area), my + cy / (3 * twice_area))
+    else:
+        centroid = (mx, my)
+    alphas = []
+    for (x, y), (gx, gy) in zip(pts.tolist(), grads.tolist(), strict=True):
+        vx, vy = centroid[0] - x, centroid[1] - y
+        norm = math.hypot(gx, gy) * math.hypot(vx, vy)
+        cos = min(abs(gx * vx + gy * vy) / norm, 1.0) if norm > 0 else 0.0
+        alphas.append(math.degrees(math.acos(cos)))
+    hits = 0
+    for i in range(n):
+        (x0, y0), (x1, y1) = (xs[i], ys[i]), (xs[(i + 1) % n], ys[(i + 1) % n])
+        if (y0 > centroid[1]) != (y1 > centroid[1]):
+            hits += centroid[0] < x0 + (centroid[1] - y0) * (x1 - x0) / (y1 - y0)
+    length = sum(math.hypot(xs[i + 1] - xs[i], ys[i + 1] - ys[i]) for i in range(n - 1))
+    chord = math.hypot(xs[-1] - xs[0], ys[-1] - ys[0])
+    gap = 0.0 if closed or length + chord == 0 else chord / (length + chord)
+    return {
+        "centroid": centroid,
+        "mean": sum(alphas) / n,
+        "median": statistics.median(alphas),
+        "inside": hits % 2 == 1,
+        "area": abs(twice_area) / 2,
+        "gap": gap,
+    }
+
+
+def _random_contours(
+    rng: np.random.Generator, sizes: list[int]
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Noisy star-shaped outlines of the given sizes (at least 3 points: open arcs too)."""
+    contours, grads = [], []
+    for n in sizes:
+        span = rng.choice([2 * np.pi, rng.uniform(0.5, 2 * np.pi)])
+        t = np.sort(rng.uniform(0, span, n))
+        r = rng.uniform(5, 60) * rng.uniform(0.7, 1.3, n)
+        centre = rng.uniform(0, 1280, 2)
+        contours.append(np.column_stack((r * np.cos(t), r * np.sin(t))) + centre)
+        grads.append(rng.normal(size=(n, 2)) * rng.choice([1.0, 300.0]))
+    return contours, grads
+
+
+def _check_against_reference(
+    contours: list[np.ndarray], grads: list[np.ndarray], closed: np.ndarray
+) -> None:
+    offsets = np.concatenate(([0], np.cumsum([len(c) for c in contours])))
+    got = shape_angles(np.vstack(contours), np.vstack(grads), offsets, closed)
+    assert len(got) == len(contours)
+    for k, (pts, g) in enumerate(zip(contours, grads, strict=True)):
+        ref = _reference(pts, g, bool(closed[k]))
+        assert tuple(got.centroid[k]) == pytest.approx(ref["centroid"], rel=1e-12, abs=1e-9), k
+        assert got.area[k] == pytest.approx(ref["area"], rel=1e-9, abs=1e-9), k
+        assert got.gap_fraction[k] == pytest.approx(ref["gap"], rel=1e-12, abs=1e-15), k
+        assert got.d_alpha_mean[k] == pytest.approx(ref["mean"], rel=1e-10, abs=1e-10), k
+        assert got.d_alpha_median[k] == pytest.approx(ref["median"], rel=1e-10, abs=1e-10), k
+        assert bool(got.centroid_inside[k]) == ref["inside"], k
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_kernel_matches_plain_python_reference(rng: np.random.Generator, dtype: type) -> None:
+    # sizes around numpy's pairwise blocks (8, 128) and beyond: 1000+ points take the recursion
+    sizes = [3, 4, 7, 8, 9, 16, 17, 127, 128, 129, 130, 256, 257, 300, 1031, 2500]
+    sizes += rng.integers(3, 400, 40).tolist()
+    contours, grads = _random_contours(rng, sizes)
+    grads = [g.astype(dtype) for g in grads]
+    closed = rng.random(len(sizes)) < 0.5
+    _check_against_reference(contours, grads, closed)
+
+
+def test_degenerate_contours_match_reference(rng: np.random.Generator) -> None:
+    contours = [
+        np.array([[3.0, 4.0]]),  # one point: its own centroid, alpha 90
+        np.array([[3.0, 4.0], [7.0, 4.0]]),  # two points
+        np.full((6, 2), 9.5),  # all points equal
+        np.column_stack((np.arange(30.0), 2.0 * np.arange(30.0))),  # a straight line
+        np.column_stack((np.arange(30.0), 0.001 * np.arange(30.0) ** 2)),  # a shallow arc
+        np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]),  # a square
+    ]
+    grads = [rng.normal(size=c.shape) for c in contours]
+    grads[2][:] = 0.0  # no direction anywhere: alpha 90
+    for closed in (False, True):
+        _check_against_reference(contours, grads, np.full(len(contours), closed))
+    got = shape_angles(np.vstack(contours), np.vstack(grads), [0, 1, 3, 9, 39, 69, 73])
+    assert got.d_alpha_median[0] == got.d_alpha_mean[0] == 90.0
+    assert got.d_alpha_median[2] == got.d_alpha_mean[2] == 90.0
+    assert tuple(got.centroid[2]) == (9.5, 9.5)
+    assert not got.centroid_inside[:4].any()
+    assert got.centroid_inside[5]
+
+
+def test_contours_touching_the_image_border(rng: np.random.Generator) -> None:
+    """Shapes cut by the image border: open arcs whose ends lie on row/column 0 or the last."""
+    t = np.linspace(-np.pi / 2, np.pi / 2, 200)
+    left = np.column_stack((30 * np.cos(t), 500 + 30 * np.sin(t)))  # half disk on column 0
+    t = np.linspace(0, np.pi, 150)
+    top = np.column_stack((640 + 40 * np.cos(t), 40 * np.sin(t)))  # half disk on row 0
+    corner = np.array([[1279.0, 1000.0], [1250.0, 1000.0], [1250.0, 1023.0], [1279.0, 1023.0]])
+    contours = [left, top, corner, np.vstack((left, left[::-1]))]
+    grads = [rng.normal(size=c.shape) for c in contours]
+    _check_against_reference(contours, grads, np.array([False, False, True, False]))
+    got = shape_angles(np.vstack(contours), np.vstack(grads), [0, 200, 350, 354, 754])
+    assert got.centroid_inside[:3].all()
+    assert got.area[:2] == pytest.approx([np.pi * 30**2 / 2, np.pi * 40**2 / 2], rel=1e-3)
+    assert got.gap_fraction[0] == pytest.approx(60 / (60 + np.pi * 30), rel=1e-3)
+    assert got.area[3] < 1e-9  # there and back again: no area, the centroid is the points' mean
+    assert tuple(got.centroid[3]) == pytest.approx(tuple(contours[3].mean(axis=0)), abs=1e-9)
+
+
+def test_median_with_ties_and_orders(rng: np.random.Generator) -> None:
+    """The selection gives the median for sorted, reversed, constant and tied angles.
+
+    (No angle near 0: there arccos turns a rounding difference of 1e-16 in the cosine into
+    1e-8 rad, and the reference's centroid differs from the kernel's in the last bits.)
+    """
+    n = 301
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    circle = np.column_stack((100 * np.cos(t), 100 * np.sin(t))) + 200
+    radial = np.column_stack((np.cos(t), np.sin(t)))
+    tangent = np.column_stack((-np.sin(t), np.cos(t)))
+    angle = rng.uniform(0, np.pi / 2, n)
+    mixes = {
+        "increasing": np.sort(angle),
+        "decreasing": np.sort(angle)[::-1],
+        "constant": np.full(n, 0.3),
+        "two values": np.where(rng.random(n) < 0.5, 0.1, 1.2),
+        "few values": rng.choice([0.01, 0.5, 1.0, np.pi / 2], n),
+        "random": angle,
+    }
+    for name, a in mixes.items():
+        g = np.cos(a)[:, None] * radial + np.sin(a)[:, None] * tangent
+        for m in (n, n - 1, 2, 3):  # odd and even counts
+            pts, grads = circle[:m], g[:m]
+            median, mean, _, _ = shape_angle(pts, grads, closed=True)
+            ref = _reference(pts, grads, True)
+            assert median == pytest.approx(ref["median"], abs=1e-10), (name, m)
+            assert mean == pytest.approx(ref["mean"], abs=1e-10), (name, m)
+
+
+def test_geometry_functions_match_reference(rng: np.random.Generator) -> None:
+    contours, grads = _random_contours(rng, rng.integers(3, 200, 30).tolist())
+    pts = np.vstack(contours)
+    offsets = np.concatenate(([0], np.cumsum([len(c) for c in contours])))
+    closed = rng.random(len(contours)) < 0.5
+    centroid, area = polygon_centroids(pts, offsets, closed)
+    gap = gap_fractions(pts, offsets, closed)
+    inside = points_in_polygons(centroid, pts, offsets)
+    assert inside.dtype == bool and inside.shape == (len(contours),)
+    for k, (p, g) in enumerate(zip(contours, grads, strict=True)):
+        ref = _reference(p, g, bool(closed[k]))
+        assert tuple(centroid[k]) == pytest.approx(ref["centroid"], rel=1e-12, abs=1e-9)
+        assert area[k] == pytest.approx(ref["area"], rel=1e-9, abs=1e-9)
+        assert gap[k] == pytest.approx(ref["gap"], rel=1e-12, abs=1e-15)
+        assert bool(inside[k]) == ref["inside"]
+    # the default closed flags: ends that are 8-neighbours
+    closed_default = polygon_centroids(pts, offsets)[0]
+    ends = np.abs(np.rint(pts[offsets[:-1]]) - np.rint(pts[offsets[1:] - 1])).max(axis=1) <= 1
+    assert np.array_equal(closed_default, polygon_centroids(pts, offsets, ends)[0])
+
+
+def test_sums_in_numpy_order(rng: np.random.Generator) -> None:
+    """Centroid and area equal the numpy formulas (``np.add.reduceat``) to the last bit."""
+    contours, _ = _random_contours(rng, [3, 9, 130, 700, 2049])
+    pts = np.vstack(contours)
+    offsets = np.concatenate(([0], np.cumsum([len(c) for c in contours])))
+    starts, counts = offsets[:-1], np.diff(offsets)
+    closed = np.ones(len(contours), bool)
+    mean = np.add.reduceat(pts, starts, axis=0) / counts[:, None]
+    rel = pts - np.repeat(mean, counts, axis=0)
+    nxt = np.arange(1, len(pts) + 1)
+    nxt[offsets[1:] - 1] = starts
+    x, y = rel[:, 0], rel[:, 1]
+    cross = x * y[nxt] - x[nxt] * y
+    twice_area = np.add.reduceat(cross, starts)
+    cx = np.add.reduceat((x + x[nxt]) * cross, starts)
+    cy = np.add.reduceat((y + y[nxt]) * cross, starts)
+    centroid, area = polygon_centroids(pts, offsets, closed)
+    assert np.array_equal(area, np.abs(twice_area) / 2.0)
+    assert np.array_equal(centroid, mean + np.column_stack((cx, cy)) / (3.0 * twice_area)[:, None])
+
+
+def test_empty_input() -> None:
+    got = shape_angles(np.empty((0, 2)), np.empty((0, 2), np.float32), np.array([0]))
+    assert len(got) == 0
+    assert got.centroid.shape == (0, 2)
+    assert got.centroid_inside.dtype == bool
+    assert got.is_des().shape == (0,)
+    assert polygon_centroids(np.empty((0, 2)), np.array([0]))[0].shape == (0, 2)
+    assert points_in_polygons(np.empty((0, 2)), np.empty((0, 2)), np.array([0])).shape == (0,)
+
+
+def test_more_bad_input_is_rejected() -> None:
+    pts, g = np.zeros((5, 2)), np.ones((5, 2))
+    with pytest.raises(ValueError, match="offsets"):
+        shape_angles(pts, g, np.array([1, 5]))
+    with pytest.raises(ValueError, match="offsets"):
+        shape_angles(pts, g, np.array([[0, 5]]))
+    with pytest.raises(ValueError, match="at least one point"):
+        shape_angles(pts, g, np.array([0, 3, 3, 5]))
+    with pytest.raises(ValueError, match="at least one point"):
+        polygon_centroids(pts, np.array([0, 4, 2, 5]))
+    with pytest.raises(ValueError, match="closed"):
+        shape_angles(pts, g, np.array([0, 5]), np.array([True, False]))
+    with pytest.raises(ValueError, match="points and gradients"):
+        shape_angles(np.zeros((5, 3)), np.zeros((5, 3)), np.array([0, 5]))
+    with pytest.raises(ValueError, match="finite"):
+        shape_angles(np.array([[0.0, 0.0], [np.nan, 1.0], [1.0, 1.0]]), g[:3], [0, 3])
+    with pytest.raises(ValueError, match="finite"):
+        shape_angles(pts, np.array([[0.0, 1.0]] * 4 + [[np.inf, 0.0]]), [0, 5])
+    with pytest.raises(ValueError, match="query"):
+        points_in_polygons(np.zeros((1, 3)), pts, np.array([0, 5]))

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from labauto.vision.edges import _NEIGHBOURS, _REMOVABLE, _nonzero_sparse, thin_edges
+from labauto.vision.edges import _NEIGHBOURS, _REMOVABLE, thin_edges
 
 
 def _thin_reference(edges: np.ndarray, max_iter: int = 2) -> np.ndarray:
@@ -45,11 +45,3 @@ def test_thin_edges_matches_full_passes(seed: int, max_iter: int) -> None:
         cv2.ellipse(edges, centre, axes, float(rng.uniform(0, 180)), 0, 360, 255, 2)
     edges[rng.random((h, w)) < 0.05] = 255
     np.testing.assert_array_equal(thin_edges(edges, max_iter), _thin_reference(edges, max_iter))
-
-
-@pytest.mark.parametrize("size", [1, 7, 8, 9, 64, 1283])
-def test_nonzero_sparse_matches_flatnonzero(size: int) -> None:
-    rng = np.random.default_rng(size)
-    flat = (rng.random(size) < 0.1).astype(np.uint8) * rng.integers(1, 256, size, dtype=np.uint8)
-    flat[-1] = 1  # a nonzero byte in the tail that is no whole 8-byte word
-    np.testing.assert_array_equal(_nonzero_sparse(flat), np.flatnonzero(flat))
