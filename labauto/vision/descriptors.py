@@ -65,6 +65,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from labauto.vision import kernels
 from labauto.vision.kernels import shape as _kernel
 
 _AXES_METHODS = ("moments", "extent")
@@ -462,7 +463,16 @@ def measure_contours(
         centres = np.ascontiguousarray(centroids, dtype=np.float64).reshape(k, 2)
         given = True
     status, series_status, values, r, rho = _kernel.measure_contours(
-        pts, off, min_points, want.reshape(k), centres, given, max_elongation, n_r, n_rho
+        pts,
+        off,
+        min_points,
+        want.reshape(k),
+        centres,
+        given,
+        max_elongation,
+        n_r,
+        n_rho,
+        kernels.threads(),
     )
     return MeasuredContours(
         status, series_status, dict(zip(_kernel.VALUE_NAMES, values.T, strict=True)), r, rho

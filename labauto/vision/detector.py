@@ -23,7 +23,7 @@ import numpy as np
 
 from labauto.vision.contours import Contours, canny_contours, color_contours
 from labauto.vision.ellipse import Ellipse
-from labauto.vision.ellipse_fit import fit_ellipses_geometric_batch
+from labauto.vision.ellipse_fit import fit_selected_ellipses
 from labauto.vision.gradient import as_uint8_image
 from labauto.vision.harmonics import classify_shapes
 from labauto.vision.shape_angle import (
@@ -269,17 +269,11 @@ def _labels(
 
 def _fits(contours: Contours, des: np.ndarray, params: DetectorParams) -> list[Ellipse | None]:
     """Geometric ellipse of every DES (step 4), all DES in one batched fit; None elsewhere."""
-    k = len(contours)
     if not params.fit_ellipses or not des.any():
-        return [None] * k
-    counts = contours.lengths
-    points = contours.points[np.repeat(des, counts)]
-    offsets = np.concatenate(([0], np.cumsum(counts[des])))
-    fits = fit_ellipses_geometric_batch(points, offsets, max_iter=FIT_MAX_ITER, tol=FIT_TOL)
-    out: list[Ellipse | None] = [None] * k
-    for j, fit in zip(np.flatnonzero(des).tolist(), fits, strict=True):
-        out[j] = None if fit is None else fit.ellipse
-    return out
+        return [None] * len(contours)
+    return fit_selected_ellipses(
+        contours.points, contours.offsets, des, max_iter=FIT_MAX_ITER, tol=FIT_TOL
+    )
 
 
 def _objects(contours: Contours, params: DetectorParams) -> list[DetectedObject]:

@@ -17,7 +17,9 @@ mentions a bootstrap that fits parts of an ellipse and combines them. This modul
   so its derivative is ``-n . d(x_contact)/d(parameter)`` at fixed ellipse parameter ``t``
   (``n`` the unit normal); this is Ahn's Jacobian in closed form. Seeded by the algebraic fit it
   converges in 3-6 iterations. :func:`fit_ellipses_geometric_batch` runs the same iteration for
-  many contours at once (each contour with its own damping and stopping).
+  many contours at once (each contour with its own damping and stopping);
+  :func:`fit_selected_ellipses` fits the selected contours of a contour set where they lie (the
+  detector's DES: no gathered copy of their points, only the ellipses built).
 * :func:`fit_ellipse_robust` - RANSAC (batched 5-point conics, MSAC scoring with the Sampson
   distance) or the paper's bootstrap (algebraic fits of random combinations of contiguous
   arcs), then the geometric fit on the inliers with the inlier set re-chosen by true
@@ -72,6 +74,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from labauto.vision import kernels
 from labauto.vision.ellipse import Ellipse
 from labauto.vision.kernels import ellipse_fit as _kernel
 
@@ -192,20 +195,35 @@ def _run(
     seed: bool,
     max_iter: int = -1,
     tol: float = 1.0,
+    index: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Run the kernel on validated input, in place on ``params``.
 
     Algebraic seeds into ``params`` when ``seed``, then the geometric fits from ``params`` when
-    ``max_iter >= 0``. Returns (K,) status codes, rms, iterations and converged flags (the last
-    three are meaningful where the status is ok and a geometric fit ran).
+    ``max_iter >= 0``, of the contours ``index`` ((K,) intp; by default all, in order). Returns
+    (K,) status codes, rms, iterations and converged flags (the last three are meaningful where
+    the status is ok and a geometric fit ran).
     """
-    k = len(off) - 1
+    if index is None:
+        index = np.arange(len(off) - 1, dtype=np.intp)
+    k = len(index)
     status = np.empty(k, dtype=np.int32)
     rms = np.zeros(k)
     iterations = np.zeros(k, dtype=np.int32)
     converged = np.zeros(k, dtype=np.uint8)
     _kernel.fit_ellipses(
-        pts, off, params, status, rms, iterations, converged, seed, min(max_iter, _INT_MAX), tol
+        pts,
+        off,
+        index,
+        params,
+        status,
+        rms,
+        iterations,
+        converged,
+        seed,
+        min(max_iter, _INT_MAX),
+        tol,
+        kernels.threads(),
     )
     return status, rms, iterations, converged
 
@@ -369,6 +387,66 @@ def fit_ellipses_geometric_batch(
         EllipseFit(Ellipse((cx, cy), (a, b), angle), fit_rms, n_iter, conv, n) if ok else None
         for ok, (cx, cy, a, b, angle), fit_rms, n_iter, conv, n in fits
     ]
+
+
+def fit_selected_ellipses(
+    points: np.ndarray,
+    offsets: np.ndarray,
+    selected: np.ndarray,
+    *,
+    max_iter: int = 50,
+    tol: float = 1e-9,
+) -> list[Ellipse | None]:
+    """Geometric ellipses of the selected contours of a contour set (the detector's batch).
+
+    The same fits as :func:`fit_ellipses_geometric_batch` of the selected contours (algebraic
+    seeds, then Levenberg-Marquardt), in one kernel call that reads the selected contours where
+    they are (no gathered copy of their points) and only the ellipses as the result.
+
+    Parameters
+    ----------
+    points : np.ndarray
+        (N, 2) float, all contours' points concatenated.
+    offsets : np.ndarray
+        (K + 1,) int, contour k is ``points[offsets[k]:offsets[k + 1]]`` (as
+        :func:`fit_ellipses_algebraic_batch`).
+    selected : np.ndarray
+        (K,) bool, the contours to fit.
+    max_iter, tol : int, float
+        As :func:`fit_ellipse_geometric`.
+
+    Returns
+    -------
+    list of Ellipse or None
+        One entry per contour: the fitted ellipse of a selected contour, None for the others
+        and where :func:`fit_ellipses_geometric_batch` gives None.
+
+    Raises
+    ------
+    ValueError
+        As :func:`fit_ellipses_geometric_batch`, or for a ``selected`` that is no (K,) mask.
+    """
+    pts, off = _check_batch(points, offsets)
+    _check_iteration_args(max_iter, tol)
+    mask = np.asarray(selected)
+    k = len(off) - 1
+    if mask.shape != (k,) or mask.dtype != np.bool_:
+        raise ValueError(
+            f"selected must be a ({k},) boolean mask, got {mask.dtype} of shape {mask.shape}"
+        )
+    index = np.flatnonzero(mask)
+    params = np.empty((len(index), 5))
+    status, _, _, _ = _run(
+        pts, off, params, seed=True, max_iter=int(max_iter), tol=float(tol), index=index
+    )
+    out: list[Ellipse | None] = [None] * k
+    # the kernel's rows are normalised already (``Ellipse.normalised``'s rule)
+    for j, ok, (cx, cy, a, b, angle) in zip(
+        index.tolist(), (status == _OK).tolist(), params.tolist(), strict=True
+    ):
+        if ok:
+            out[j] = Ellipse((cx, cy), (a, b), angle)
+    return out
 
 
 def _check_iteration_args(max_iter: int, tol: float) -> None:

@@ -21,6 +21,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from labauto.vision import kernels
 from labauto.vision.kernels.gradient import max_channel_sobel
 
 
@@ -114,5 +115,5 @@ def color_gradient(image: np.ndarray, blur_sigma: float = 0.7) -> tuple[np.ndarr
         return cv2.spatialGradient(blurred)
     gx = np.empty(image.shape[:2], np.int16)
     gy = np.empty(image.shape[:2], np.int16)
-    max_channel_sobel(blurred, gx, gy)  # one pass over the three channels, rows in parallel
+    max_channel_sobel(blurred, gx, gy, kernels.threads())  # one pass, rows in parallel
     return gx, gy

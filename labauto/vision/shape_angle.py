@@ -51,6 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from labauto.vision import kernels
 from labauto.vision.kernels import shape_angle as _kernel
 
 #: An open contour's chord-closed polygon gives the centroid when its area exceeds this times
@@ -206,7 +207,9 @@ def _geometry(
     flags = _closed(closed, points, offsets)
     k = offsets.shape[0] - 1
     centroid, area, gap = np.empty((k, 2)), np.empty(k), np.empty(k)
-    _kernel.polygon_centroids(points, offsets, flags, OPEN_MIN_AREA_RATIO, centroid, area, gap)
+    _kernel.polygon_centroids(
+        points, offsets, flags, OPEN_MIN_AREA_RATIO, centroid, area, gap, kernels.threads_for(k)
+    )
     return centroid, area, gap
 
 
@@ -232,7 +235,9 @@ def points_in_polygons(query: np.ndarray, points: np.ndarray, offsets: np.ndarra
     offsets = _offsets(offsets)
     query = _points(query, "query")
     inside = np.empty(offsets.shape[0] - 1, np.uint8)
-    _kernel.points_in_polygons(query, points, offsets, inside)
+    _kernel.points_in_polygons(
+        query, points, offsets, inside, kernels.threads_for(offsets.shape[0] - 1)
+    )
     return inside.view(bool)
 
 
@@ -295,6 +300,7 @@ def shape_angles(
         area,
         gap,
         scratch,
+        kernels.threads_for(k),
     )
     return ShapeAngles(centroid, mean, median, inside.view(bool), area, gap)
 

@@ -17,6 +17,7 @@ from labauto.vision.ellipse_fit import (
     fit_ellipse_robust,
     fit_ellipses_algebraic_batch,
     fit_ellipses_geometric_batch,
+    fit_selected_ellipses,
     orthogonal_distances,
 )
 
@@ -621,6 +622,85 @@ def test_big_batch_equals_one_by_one_fits_exactly() -> None:
         assert fit == fit_ellipse_geometric(pts, max_iter=5, tol=1e-5)
         assert fit is not None and fit.rms == fit_ellipse_geometric(pts, max_iter=5, tol=1e-5).rms
         assert Ellipse.normalised(*rows[k]) == fit_ellipse_algebraic(pts)
+
+
+def test_selected_ellipses_equal_the_batch_of_the_gathered_contours() -> None:
+    # the detector's call: the DES read in place from the whole contour set; every ellipse is
+    # the batch fit of the gathered DES, bit for bit (both sides of the thread threshold)
+    gen = np.random.default_rng(21)
+    contours = []
+    for _ in range(60):
+        a = gen.uniform(8, 60)
+        truth = Ellipse(
+            (gen.uniform(0, 1000), gen.uniform(0, 800)), (a, a * gen.uniform(0.3, 1)), 12.0
+        )
+        pts = truth.sample(int(gen.integers(5, 150)), 0.0, gen.uniform(1.5, 6.3))
+        contours.append(pts + gen.normal(0, 0.4, pts.shape))
+    contours[3] = contours[3][:4]  # too few points
+    contours[5] = np.column_stack((np.arange(9.0), 2.0 * np.arange(9.0)))  # collinear
+    points = np.concatenate(contours)
+    offsets = np.concatenate(([0], np.cumsum([len(c) for c in contours])))
+    for selected in (
+        gen.random(60) < 0.5,
+        np.arange(60) < 6,  # few points: one thread
+        np.ones(60, bool),
+        np.zeros(60, bool),
+        np.arange(60) == 59,  # only the last contour
+    ):
+        selected[3] = selected[5] = True
+        counts = np.diff(offsets)
+        gathered = fit_ellipses_geometric_batch(
+            points[np.repeat(selected, counts)],
+            np.concatenate(([0], np.cumsum(counts[selected]))),
+            max_iter=5,
+            tol=1e-5,
+        )
+        found = fit_selected_ellipses(points, offsets, selected, max_iter=5, tol=1e-5)
+        assert len(found) == 60
+        assert [e for e, s in zip(found, selected, strict=True) if s] == [
+            None if f is None else f.ellipse for f in gathered
+        ]
+        assert all(e is None for e, s in zip(found, selected, strict=True) if not s)
+        assert found[3] is None and found[5] is None
+
+
+def test_selected_ellipses_edge_cases_and_errors() -> None:
+    truth = TRUTHS[0]
+    pts = truth.sample(40)
+    (only,) = fit_selected_ellipses(pts, np.array([0, 40]), np.array([True]))
+    assert only == fit_ellipse_geometric(pts).ellipse
+    assert fit_selected_ellipses(np.zeros((0, 2)), np.array([0]), np.zeros(0, bool)) == []
+    assert fit_selected_ellipses(pts, np.array([0, 0, 40, 40]), np.ones(3, bool))[::2] == [
+        None,
+        None,
+    ]
+    with pytest.raises(ValueError, match="selected"):
+        fit_selected_ellipses(pts, np.array([0, 40]), np.array([1]))
+    with pytest.raises(ValueError, match="selected"):
+        fit_selected_ellipses(pts, np.array([0, 20, 40]), np.array([True]))
+    with pytest.raises(ValueError, match="offsets"):
+        fit_selected_ellipses(pts, np.array([0, 30, 20, 40]), np.ones(3, bool))
+    with pytest.raises(ValueError, match="tol"):
+        fit_selected_ellipses(pts, np.array([0, 40]), np.array([True]), tol=0.0)
+
+
+def test_kernel_checks_its_contour_index() -> None:
+    from labauto.vision.kernels import ellipse_fit as kernel
+
+    pts = TRUTHS[0].sample(40)
+    out = (np.empty((1, 5)), np.empty(1, np.int32), np.empty(1), np.empty(1, np.int32))
+    for bad in (-1, 2):
+        with pytest.raises(ValueError, match="index"):
+            kernel.fit_ellipses(
+                pts,
+                np.array([0, 20, 40]),
+                np.array([bad]),
+                *out,
+                np.empty(1, np.uint8),
+                True,
+                5,
+                1e-5,
+            )
 
 
 def test_any_memory_layout_is_accepted() -> None:

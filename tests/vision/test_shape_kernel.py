@@ -133,6 +133,36 @@ def test_convex_hull_and_box_against_brute_force(seed: int) -> None:
             assert long_ * short == pytest.approx(w * h, rel=1e-5, abs=1e-3)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_hull_and_box_of_pixel_contours_and_points_on_the_split_line(seed: int) -> None:
+    """The hull splits the sorted points by the line from the first to the last one: points on
+    that line, many points per column, and long hulls (the calipers' many small steps)."""
+    gen = np.random.default_rng(seed)
+    t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    a, b, phi = gen.uniform(20, 60), gen.uniform(3, 20), gen.uniform(0, np.pi)
+    ellipse = np.column_stack(
+        (
+            100 + a * np.cos(t) * np.cos(phi) - b * np.sin(t) * np.sin(phi),
+            80 + a * np.cos(t) * np.sin(phi) + b * np.sin(t) * np.cos(phi),
+        )
+    )
+    on_line = np.column_stack((np.arange(0.0, 11.0), 0.5 * np.arange(0.0, 11.0)))
+    cases = [
+        np.rint(ellipse),  # a pixel contour
+        ellipse,  # a long hull
+        on_line,  # every point on the line from the first to the last
+        np.vstack((on_line, [[4.0, 5.0], [6.0, -3.0], [3.0, 1.5]])),  # and off it
+        np.vstack((gen.uniform(0, 10, (30, 2)) * [3, 1], [[0.0, 0.0], [30.0, 10.0], [15.0, 5.0]])),
+    ]
+    for pts in cases:
+        hull = convex_hull(pts)
+        assert {tuple(p) for p in hull} == _hull_reference(pts)
+        long_, short = min_area_box(pts)
+        ref_long, ref_short = _box_reference(pts)
+        assert long_ * short == pytest.approx(ref_long * ref_short, rel=1e-12, abs=1e-9)
+        assert long_ / max(short, 1e-300) <= ref_long / max(ref_short, 1e-300) * (1 + 1e-9)
+
+
 def test_box_of_a_triangle_is_the_least_elongated_of_its_three() -> None:
     tri = np.array([[0.0, 0.0], [40.0, 0.0], [25.0, 30.0]])  # acute
     boxes = []

@@ -3,4 +3,58 @@
 Each module here is the inner loop of one step of the paper, called from the pure-Python module
 of the same name in :mod:`labauto.vision`, which holds the documentation and input checks. They
 are built when the package is installed (``pip install .`` needs a C compiler); see setup.py.
+
+Threads: the long loops (per pixel, per contour) are shared among :func:`threads` OpenMP threads,
+by default one per CPU this process may run on, or ``LABAUTO_THREADS`` when set. OpenMP's thread
+pool does not survive ``fork``: a forked child (``multiprocessing`` with the fork start method)
+that entered a parallel loop would hang, so a child runs the kernels on one thread.
 """
+
+from __future__ import annotations
+
+import os
+
+
+def _default_threads() -> int:
+    configured = os.environ.get("LABAUTO_THREADS", "").strip()
+    if configured:
+        try:
+            value = int(configured)
+        except ValueError:
+            raise ValueError(
+                f"LABAUTO_THREADS must be a whole number >= 1, got {configured!r}"
+            ) from None
+        if value < 1:
+            raise ValueError(f"LABAUTO_THREADS must be a whole number >= 1, got {configured!r}")
+        return value
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+_threads = _default_threads()
+
+
+def threads() -> int:
+    """Number of threads the kernels use for their parallel loops."""
+    return _threads
+
+
+def set_threads(count: int) -> None:
+    """Use ``count`` (>= 1) threads in the kernels' parallel loops from now on."""
+    global _threads
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise ValueError(f"thread count must be a whole number >= 1, got {count!r}")
+    _threads = count
+
+
+def threads_for(count: int, min_count: int = 16) -> int:
+    """Threads for a loop over ``count`` independent items: one for fewer than ``min_count``.
+
+    Waking a second thread costs tens of microseconds; a short loop is faster on one.
+    """
+    return _threads if count >= min_count else 1
+
+
+os.register_at_fork(after_in_child=lambda: set_threads(1))

@@ -782,6 +782,7 @@ cdef void _fit_one(
 def fit_ellipses(
     const double[:, ::1] points,
     const Py_ssize_t[::1] offsets,
+    const Py_ssize_t[::1] index,
     double[:, ::1] params,
     int[::1] status,
     double[::1] rms,
@@ -790,14 +791,18 @@ def fit_ellipses(
     bint seed,
     int max_iter,
     double tol,
+    int num_threads=1,
 ) -> None:
-    """Algebraic seeds and/or geometric fits of K contours, in place.
+    """Algebraic seeds and/or geometric fits of K of the contours of a contour set, in place.
 
     Parameters
     ----------
-    points : (N, 2) float64 ``(x, y)``, C-contiguous
-    offsets : (K + 1,) intp, contour k is ``points[offsets[k]:offsets[k + 1]]``, rising
+    points : (N, 2) float64 ``(x, y)``, C-contiguous, every contour of the set
+    offsets : (C + 1,) intp, contour c is ``points[offsets[c]:offsets[c + 1]]``, rising
         from 0 to N
+    index : (K,) intp, the contours to fit (each in [0, C)); row j of the outputs is contour
+        ``index[j]``. The detector fits its DES in place this way, without gathering their
+        points; a plain batch passes ``arange(C)``.
     params : (K, 5) float64 rows ``(cx, cy, a, b, angle_deg)``: the initial rows when ``seed``
         is false (checked here: finite, a, b > 0), else written with the algebraic fits. On
         return the result rows, normalised as ``Ellipse.normalised`` (``a >= b``, angle in
@@ -808,45 +813,52 @@ def fit_ellipses(
     max_iter : Levenberg-Marquardt iterations at most; < 0: no geometric fit (``rms`` etc.
         are left alone)
     tol : convergence tolerance (``fit_ellipse_geometric``)
+    num_threads : threads sharing the contours (see :func:`labauto.vision.kernels.threads`)
 
-    Contours are shared among threads when there are more than PARALLEL_MIN_POINTS points;
+    Contours are shared among threads when they hold PARALLEL_MIN_POINTS points or more;
     every contour's result is the same either way.
     """
-    cdef Py_ssize_t k_count = offsets.shape[0] - 1, n_total = points.shape[0], k
+    cdef Py_ssize_t c_count = offsets.shape[0] - 1, n_total = points.shape[0]
+    cdef Py_ssize_t k_count = index.shape[0], k, c, n_fit = 0
     cdef double* scratch
+    cdef Py_ssize_t* start  # contour j's contact roots: 2 n doubles from scratch + 2 start[j]
     cdef double* base
-    if k_count < 0 or params.shape[0] != k_count or params.shape[1] != 5 \
+    if c_count < 0 or params.shape[0] != k_count or params.shape[1] != 5 \
             or status.shape[0] != k_count or rms.shape[0] != k_count \
             or iterations.shape[0] != k_count or converged.shape[0] != k_count \
             or points.shape[1] != 2:
         raise ValueError("fit_ellipses: inconsistent array shapes")
+    if c_count > 0 and (offsets[0] != 0 or offsets[c_count] != n_total):
+        raise ValueError("fit_ellipses: offsets must run from 0 to len(points)")
+    for c in range(c_count):
+        if offsets[c + 1] < offsets[c]:
+            raise ValueError("fit_ellipses: offsets must not decrease")
+    for k in range(k_count):
+        if index[k] < 0 or index[k] >= c_count:
+            raise ValueError("fit_ellipses: index out of range of the contours")
     if k_count == 0:
         return
-    if offsets[0] != 0 or offsets[k_count] != n_total:
-        raise ValueError("fit_ellipses: offsets must run from 0 to len(points)")
+    start = <Py_ssize_t*>malloc(k_count * sizeof(Py_ssize_t))
+    if start == NULL:
+        raise MemoryError()
     for k in range(k_count):
-        if offsets[k + 1] < offsets[k]:
-            raise ValueError("fit_ellipses: offsets must not decrease")
-    scratch = <double*>malloc((2 * n_total + 1) * sizeof(double))  # contact roots, 2 sets
+        start[k] = n_fit
+        n_fit += offsets[index[k] + 1] - offsets[index[k]]
+    scratch = <double*>malloc((2 * n_fit + 1) * sizeof(double))
     if scratch == NULL:
+        free(start)
         raise MemoryError()
     base = <double*>&points[0, 0] if n_total > 0 else NULL
-    with nogil:
-        if n_total < PARALLEL_MIN_POINTS:
-            for k in range(k_count):
-                _fit_one(
-                    base + 2 * offsets[k], offsets[k + 1] - offsets[k], &params[k, 0],
-                    &status[k], seed, max_iter, tol, scratch + 2 * offsets[k], &rms[k],
-                    &iterations[k], &converged[k],
-                )
-        else:
-            for k in prange(k_count, schedule="dynamic"):
-                _fit_one(
-                    base + 2 * offsets[k], offsets[k + 1] - offsets[k], &params[k, 0],
-                    &status[k], seed, max_iter, tol, scratch + 2 * offsets[k], &rms[k],
-                    &iterations[k], &converged[k],
-                )
+    # a short batch (a single fit, a robust refit) is faster on one thread than waking another
+    cdef int nt = 1 if n_fit < PARALLEL_MIN_POINTS else max(num_threads, 1)
+    for k in prange(k_count, nogil=True, schedule="dynamic", num_threads=nt):
+        _fit_one(
+            base + 2 * offsets[index[k]], offsets[index[k] + 1] - offsets[index[k]],
+            &params[k, 0], &status[k], seed, max_iter, tol, scratch + 2 * start[k],
+            &rms[k], &iterations[k], &converged[k],
+        )
     free(scratch)
+    free(start)
 
 
 def orthogonal_distances(

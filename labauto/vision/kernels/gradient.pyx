@@ -69,7 +69,7 @@ cdef void _sobel_row(
 
 
 def max_channel_sobel(
-    const unsigned char[:, :, ::1] image, short[:, ::1] gx, short[:, ::1] gy
+    const unsigned char[:, :, ::1] image, short[:, ::1] gx, short[:, ::1] gy, int num_threads=1
 ) -> None:
     """Fill ``gx``, ``gy`` (int16 HxW) with the Sobel gradient of the strongest channel.
 
@@ -77,6 +77,8 @@ def max_channel_sobel(
     ----------
     image : uint8 HxWx3 (at least 2x2), C-contiguous
     gx, gy : int16 HxW, C-contiguous, written in place
+    num_threads : int
+        Threads sharing the rows (see :func:`labauto.vision.kernels.threads`).
     """
     cdef Py_ssize_t h = image.shape[0], w = image.shape[1], y
     cdef short* row_dx
@@ -84,7 +86,9 @@ def max_channel_sobel(
     if h < 2 or w < 2 or image.shape[2] != 3 or gx.shape[0] != h or gx.shape[1] != w \
             or gy.shape[0] != h or gy.shape[1] != w:
         raise ValueError("max_channel_sobel needs an HxWx3 image (2x2 or more) and HxW outputs")
-    with nogil, parallel():
+    if num_threads < 1:
+        raise ValueError(f"num_threads must be >= 1, got {num_threads}")
+    with nogil, parallel(num_threads=num_threads):
         row_dx = <short*>malloc(6 * w * sizeof(short))  # per thread: dx and dy of one row
         row_dy = row_dx + 3 * w
         if row_dx != NULL:

@@ -52,6 +52,12 @@ VALUE_NAMES = (
     "star_shapedness", "winding",
 )
 
+cdef extern from *:
+    # restrict pointers: the per-edge loops over harmonics read and write several arrays of one
+    # work buffer; without restrict gcc does not vectorise them (too many pointers to check)
+    ctypedef double* double_r "double * __restrict__"
+    ctypedef const double* cdouble_r "const double * __restrict__"
+
 cdef double PI = 3.141592653589793
 cdef double NO_AREA_COMPACTNESS = 1e-9  # below it a polygon has no area (a traced line)
 
@@ -180,28 +186,60 @@ cdef inline double _turn(const double* o, const double* a, const double* b) noex
     return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
 
-cdef Py_ssize_t _hull(const double* p, Py_ssize_t n, double* h) noexcept nogil:
-    """Convex hull (Andrew's monotone chain) of n >= 1 sorted points into h (2 (n + 1) doubles).
+cdef Py_ssize_t _chain(
+    const double* p, Py_ssize_t n, Py_ssize_t step, double* h, Py_ssize_t k, Py_ssize_t t,
+) noexcept nogil:
+    """One chain of the monotone chain: push the n points p, p + 2 step, ... onto the stack h of
+    k vertices, first popping the top while it does not turn left and k >= t; the new k."""
+    cdef Py_ssize_t i
+    cdef const double* pi
+    for i in range(n):
+        pi = p + 2 * i * step
+        while k >= t and _turn(h + 2 * k - 4, h + 2 * k - 2, pi) <= 0.0:
+            k -= 1
+        h[2 * k] = pi[0]
+        h[2 * k + 1] = pi[1]
+        k += 1
+    return k
+
+
+cdef Py_ssize_t _hull(const double* p, Py_ssize_t n, double* h, double* w) noexcept nogil:
+    """Convex hull (Andrew's monotone chain) of n >= 1 sorted points into h (2 (n + 1) doubles;
+    w: 4 n + 4 doubles of work).
 
     Counter-clockwise in (x, y) axes, without collinear vertices; collinear points give their two
-    ends, a single point one vertex.
+    ends, a single point one vertex. The points are first split by the line from the first (L)
+    to the last (R) sorted point: the lower chain L -> R takes only those not above it, the upper
+    chain R -> L those not below it (a band of 1e-12 of the scale, so rounding keeps every hull
+    vertex in its chain). Points off a chain would be pushed and popped again at about one
+    mispredicted branch each; the split is branchless (both lists written, one count advanced).
     """
-    cdef Py_ssize_t i, k = 0, t
-    for i in range(n):
-        while k >= 2 and _turn(h + 2 * k - 4, h + 2 * k - 2, p + 2 * i) <= 0.0:
-            k -= 1
-        h[2 * k] = p[2 * i]
-        h[2 * k + 1] = p[2 * i + 1]
-        k += 1
-    t = k + 1
-    i = n - 2
-    while i >= 0:
-        while k >= t and _turn(h + 2 * k - 4, h + 2 * k - 2, p + 2 * i) <= 0.0:
-            k -= 1
-        h[2 * k] = p[2 * i]
-        h[2 * k + 1] = p[2 * i + 1]
-        k += 1
-        i -= 1
+    cdef Py_ssize_t i, k, nl = 1, nu = 0
+    cdef double lx = p[0], ly = p[1], dx = p[2 * n - 2] - lx, dy = p[2 * n - 1] - ly
+    cdef double ex, ey, c, tol, sx = fabs(dx) + fabs(dy)
+    cdef double* lower = w  # L, the points not above the line (ascending), R
+    cdef double* upper = w + 2 * n + 2  # L, the points not below it (ascending)
+    lower[0] = lx
+    lower[1] = ly
+    upper[0] = lx
+    upper[1] = ly
+    for i in range(1, n - 1):
+        ex = p[2 * i] - lx
+        ey = p[2 * i + 1] - ly
+        c = dx * ey - dy * ex  # > 0: above (left of L -> R)
+        tol = 1e-12 * sx * (fabs(ex) + fabs(ey))
+        lower[2 * nl] = p[2 * i]
+        lower[2 * nl + 1] = p[2 * i + 1]
+        upper[2 * nu + 2] = p[2 * i]
+        upper[2 * nu + 3] = p[2 * i + 1]
+        nl += c <= tol
+        nu += c >= -tol
+    if n > 1:
+        lower[2 * nl] = p[2 * n - 2]  # R
+        lower[2 * nl + 1] = p[2 * n - 1]
+        nl += 1
+    k = _chain(lower, nl, 1, h, 0, 2)
+    k = _chain(upper + 2 * nu, nu + 1 if n > 1 else 0, -1, h, k, k + 1)  # descending, then L
     if k > 1:
         k -= 1  # the last vertex repeats the first
     if k == 2 and h[0] == h[2] and h[1] == h[3]:
@@ -213,11 +251,46 @@ cdef inline double _dot(const double* p, const double* o, double ux, double uy) 
     return (p[0] - o[0]) * ux + (p[1] - o[1]) * uy
 
 
-cdef void _min_area_box(const double* h, Py_ssize_t m, double* side) noexcept nogil:
+cdef inline Py_ssize_t _walk(
+    const double* h, Py_ssize_t m, Py_ssize_t j, const double* o, double ux, double uy,
+) noexcept nogil:
+    """From vertex j, the first vertex along the hull whose successor is lower in direction
+    (ux, uy) (heights about o; at most m steps).
+
+    Between two hull edges an extreme vertex moves 0 or 1 steps, seldom more, and the two are
+    about equally likely: the first two steps are taken without branches (selects on locals),
+    so the one branch left (a third step) is predictable."""
+    cdef Py_ssize_t jn, steps = 2
+    cdef double cur = _dot(h + 2 * j, o, ux, uy), nxt
+    cdef bint take
+    jn = j + 1 if j + 1 < m else 0
+    nxt = _dot(h + 2 * jn, o, ux, uy)
+    take = not (nxt < cur)
+    j = jn if take else j
+    cur = nxt if take else cur
+    jn = j + 1 if j + 1 < m else 0
+    nxt = _dot(h + 2 * jn, o, ux, uy)
+    take = take & (not (nxt < cur))
+    j = jn if take else j
+    cur = nxt if take else cur
+    while take and steps < m:
+        jn = j + 1 if j + 1 < m else 0
+        nxt = _dot(h + 2 * jn, o, ux, uy)
+        take = not (nxt < cur)
+        j = jn if take else j
+        cur = nxt if take else cur
+        steps += 1
+    return j
+
+
+cdef void _min_area_box(const double* h, Py_ssize_t m, double* u, double* side) noexcept nogil:
     """Long and short side of the minimum-area rectangle around the convex polygon h (m vertices,
     counter-clockwise): rotating calipers, one side of the box on each hull edge in turn; of
-    boxes with the same area (to 1e-12) the least elongated."""
-    cdef Py_ssize_t i, i1, j, jn, far = 0, hi = 0, lo = 0, steps
+    boxes with the same area (to 1e-12) the least elongated.
+
+    Two passes: the unit directions of all edges into u (2 m doubles; one loop, square roots
+    and divisions vectorised), then the calipers (:func:`_walk`)."""
+    cdef Py_ssize_t i, j, far = 0, hi = 0, lo = 0
     cdef double ux, uy, length, width, extent, area, best = INFINITY, long_side, short_side
     side[0] = 0.0
     side[1] = 0.0
@@ -227,13 +300,19 @@ cdef void _min_area_box(const double* h, Py_ssize_t m, double* side) noexcept no
         side[0] = sqrt(ux * ux + uy * uy)
     if m < 3:
         return
+    for i in range(2 * m - 2):  # u[2 i], u[2 i + 1]: edge i -> i + 1, the last one below
+        u[i] = h[i + 2] - h[i]
+    u[2 * m - 2] = h[0] - h[2 * m - 2]
+    u[2 * m - 1] = h[1] - h[2 * m - 1]
     for i in range(m):
-        i1 = i + 1 if i + 1 < m else 0
-        ux = h[2 * i1] - h[2 * i]
-        uy = h[2 * i1 + 1] - h[2 * i + 1]
+        ux = u[2 * i]
+        uy = u[2 * i + 1]
         length = sqrt(ux * ux + uy * uy)
-        ux /= length
-        uy /= length
+        u[2 * i] = ux / length
+        u[2 * i + 1] = uy / length
+    for i in range(m):
+        ux = u[2 * i]
+        uy = u[2 * i + 1]
         if i == 0:  # the extreme vertices of the first edge by a full scan
             for j in range(1, m):
                 if _dot(h + 2 * j, h, -uy, ux) > _dot(h + 2 * far, h, -uy, ux):
@@ -243,27 +322,9 @@ cdef void _min_area_box(const double* h, Py_ssize_t m, double* side) noexcept no
                 if _dot(h + 2 * j, h, ux, uy) < _dot(h + 2 * lo, h, ux, uy):
                     lo = j
         else:  # as the edge turns counter-clockwise, so do its extreme vertices
-            steps = 0
-            while steps < m:
-                jn = far + 1 if far + 1 < m else 0
-                if _dot(h + 2 * jn, h + 2 * i, -uy, ux) < _dot(h + 2 * far, h + 2 * i, -uy, ux):
-                    break
-                far = jn
-                steps += 1
-            steps = 0
-            while steps < m:
-                jn = hi + 1 if hi + 1 < m else 0
-                if _dot(h + 2 * jn, h + 2 * i, ux, uy) < _dot(h + 2 * hi, h + 2 * i, ux, uy):
-                    break
-                hi = jn
-                steps += 1
-            steps = 0
-            while steps < m:
-                jn = lo + 1 if lo + 1 < m else 0
-                if _dot(h + 2 * jn, h + 2 * i, ux, uy) > _dot(h + 2 * lo, h + 2 * i, ux, uy):
-                    break
-                lo = jn
-                steps += 1
+            far = _walk(h, m, far, h + 2 * i, -uy, ux)
+            hi = _walk(h, m, hi, h + 2 * i, ux, uy)
+            lo = _walk(h, m, lo, h + 2 * i, -ux, -uy)  # lowest: highest in direction -u
         width = _dot(h + 2 * far, h + 2 * i, -uy, ux)
         extent = _dot(h + 2 * hi, h + 2 * i, ux, uy) - _dot(h + 2 * lo, h + 2 * i, ux, uy)
         area = width * extent
@@ -283,9 +344,10 @@ cdef void _min_area_box(const double* h, Py_ssize_t m, double* side) noexcept no
 
 cdef int _descriptors(
     const double* q, Py_ssize_t n, double* sorted_a, double* sorted_b, Py_ssize_t* runs,
-    double* hull, double* out,
+    double* hull, double* work, double* out,
 ) noexcept nogil:
-    """Descriptors of the polygon q (n >= 2 points, no repeats) into out[0:10]; the status."""
+    """Descriptors of the polygon q (n >= 2 points, no repeats) into out[0:10]; the status
+    (work: 4 n + 4 doubles)."""
     cdef Py_ssize_t i, j, m
     cdef double ac[3]
     cdef double side[2]
@@ -356,7 +418,7 @@ cdef int _descriptors(
     for i in range(2 * n):
         sorted_a[i] = q[i]
     s = _sort_points(sorted_a, sorted_b, n, runs)
-    m = _hull(s, n, hull)
+    m = _hull(s, n, hull, work)
     total = 0.0
     for i in range(m):
         j = i + 1 if i + 1 < m else 0
@@ -364,7 +426,7 @@ cdef int _descriptors(
         ey = hull[2 * j + 1] - hull[2 * i + 1]
         total += sqrt(ex * ex + ey * ey)
     out[7] = total
-    _min_area_box(hull, m, side)
+    _min_area_box(hull, m, sorted_a, side)  # the sorted points are done with
     long_side = side[0]
     short_side = side[1]
     if short_side > 1e-12 * long_side:
@@ -395,6 +457,33 @@ cdef inline void _powers(double ux, double uy, int m, double* pr, double* pi) no
     for k in range(4, m + 1):
         pr[k] = pr[k - 4] * u4r - pi[k - 4] * u4i
         pi[k] = pr[k - 4] * u4i + pi[k - 4] * u4r
+
+
+cdef inline void _differences(
+    cdouble_r p0r, cdouble_r p0i, cdouble_r p1r, cdouble_r p1i, cdouble_r inv_m, int m,
+    double_r dr, double_r di,
+) noexcept nogil:
+    """dr + i di = D_k = (w1^k - w0^k) / (ik) for k = 1..m (one vectorised loop)."""
+    cdef int k
+    for k in range(1, m + 1):
+        dr[k] = (p1i[k] - p0i[k]) * inv_m[k]
+        di[k] = (p0r[k] - p1r[k]) * inv_m[k]
+
+
+cdef inline void _add_rho(
+    double_r accr, double_r acci, cdouble_r dr, cdouble_r di, double hh, double ar, double ai,
+    int n,
+) noexcept nogil:
+    """acc_k += hh D_k + (ar + i ai)^* D_{k+2} + (ar + i ai) D_{k-2}, k = 0..n (dr, di point at
+    D_0; one vectorised loop)."""
+    cdef int k
+    for k in range(n + 1):
+        accr[k] += hh * dr[k] + (ar * dr[k + 2] + ai * di[k + 2]) + (
+            ar * dr[k - 2] - ai * di[k - 2]
+        )
+        acci[k] += hh * di[k] + (ar * di[k + 2] - ai * dr[k + 2]) + (
+            ar * di[k - 2] + ai * dr[k - 2]
+        )
 
 
 cdef int _series(
@@ -482,9 +571,7 @@ cdef int _series(
             du = atan2(s1 * c0 - c1 * s0, c1 * c0 + s1 * s0)  # each edge subtends less than pi
             net += du
             total += fabs(du)
-            for k in range(1, big_m + 1):
-                dr[k + 2] = (p1i[k] - p0i[k]) * inv_m[k]
-                di[k + 2] = (p0r[k] - p1r[k]) * inv_m[k]
+            _differences(p0r, p0i, p1r, p1i, inv_m, big_m, dr + 2, di + 2)
             dr[2] = du
             di[2] = 0.0
             dr[1] = dr[3]
@@ -497,13 +584,7 @@ cdef int _series(
                 hh = 0.5 / (d * d)
                 ar = 0.5 * hh * n2r  # nu^2 / (4 d^2)
                 ai = 0.5 * hh * n2i
-                for k in range(n_rho + 1):
-                    accr[k] += hh * dr[k + 2] + (ar * dr[k + 4] + ai * di[k + 4]) + (
-                        ar * dr[k] - ai * di[k]
-                    )
-                    acci[k] += hh * di[k + 2] + (ar * di[k + 4] - ai * dr[k + 4]) + (
-                        ar * di[k] + ai * dr[k]
-                    )
+                _add_rho(accr, acci, dr + 2, di + 2, hh, ar, ai, n_rho)
             if n_r >= 0:
                 # K_0 = asinh(tan u1) - asinh(tan u0) = log(e1 / e0), e = (1 + sin u) / cos u,
                 # or cos u / (1 - sin u) without cancellation for sin u < 0; Im K_1 = log(c0 / c1)
@@ -571,7 +652,8 @@ cdef void _contour(
     int n_r, int n_rho, double* r, double* rho, double* out, signed char* status,
     signed char* series_status,
 ) noexcept nogil:
-    """Everything about one contour (buf: 8 max_n + 2 + _series_work(n_r, n_rho) doubles)."""
+    """Everything about one contour (buf: 8 max_n + 2 doubles, then the work of the hull,
+    4 max_n + 4, and of the series, 7 (big_m + 3) + 2 (n_rho + 1), sharing their place)."""
     cdef Py_ssize_t i, n
     cdef int nh = n_r if n_r > n_rho else n_rho
     cdef double* q = buf
@@ -595,7 +677,7 @@ cdef void _contour(
         status[0] = S_ONE_POINT
     else:
         status[0] = _descriptors(
-            q, n, buf + 2 * max_n, buf + 4 * max_n, runs, buf + 6 * max_n, out
+            q, n, buf + 2 * max_n, buf + 4 * max_n, runs, buf + 6 * max_n, work, out
         )
         if status[0] != S_OK:
             for i in range(NV):
@@ -614,7 +696,7 @@ def measure_contours(
     double max_elongation,
     int n_r,
     int n_rho,
-    int num_threads=0,
+    int num_threads=1,
 ):
     """Descriptors (and polar series) of K concatenated contours in one call.
 
@@ -627,7 +709,7 @@ def measure_contours(
     centres : float64 (K, 2) centres of the series when ``given_centres`` (else any (K, 2))
     max_elongation : no series where the elongation is at least this (a line); inf: none
     n_r, n_rho : highest harmonic of r and r^-2 (-1: none)
-    num_threads : threads sharing the contours (0: 2 from 16 contours on, else 1)
+    num_threads : threads sharing the contours from 16 contours on (fewer: one thread)
 
     Returns
     -------
@@ -667,8 +749,8 @@ def measure_contours(
     cdef Py_ssize_t* runs
     if k_total == 0:
         return status_arr, series_arr, values_arr, r_arr, rho_arr
-    n_buf = 8 * max_n + 2 + 7 * (big_m + 3) + 2 * (n_rho + 1) + 8
-    nt = num_threads if num_threads > 0 else (2 if k_total >= 16 else 1)
+    n_buf = 8 * max_n + 2 + max(4 * max_n + 4, 7 * (big_m + 3) + 2 * (n_rho + 1)) + 8
+    nt = max(num_threads, 1) if k_total >= 16 else 1
     with nogil, parallel(num_threads=nt):
         buf = <double*> malloc(n_buf * sizeof(double))
         runs = <Py_ssize_t*> malloc((max_n + 2) * sizeof(Py_ssize_t))
@@ -744,7 +826,7 @@ def convex_hull(const double[:, ::1] points):
     cdef Py_ssize_t n = points.shape[0], i, m
     if n < 1 or points.shape[1] != 2:
         raise ValueError("convex_hull needs (n, 2) points, n >= 1")
-    work = np.empty(6 * n + 2, np.float64)
+    work = np.empty(10 * n + 6, np.float64)
     runs_arr = np.empty(n + 2, np.intp)
     cdef double[::1] w = work
     cdef Py_ssize_t[::1] runs = runs_arr
@@ -753,7 +835,7 @@ def convex_hull(const double[:, ::1] points):
         for i in range(2 * n):
             w[i] = (&points[0, 0])[i]
         s = _sort_points(&w[0], &w[2 * n], n, &runs[0])
-        m = _hull(s, n, &w[4 * n])
+        m = _hull(s, n, &w[4 * n], &w[6 * n + 2])
     return work[4 * n : 4 * n + 2 * m].reshape(m, 2).copy()
 
 
@@ -764,5 +846,7 @@ def min_area_box(const double[:, ::1] points):
     hull = convex_hull(points)
     cdef const double[:, ::1] h = hull
     m = h.shape[0]
-    _min_area_box(&h[0, 0], m, side)
+    u = np.empty(2 * m, np.float64)
+    cdef double[::1] uv = u
+    _min_area_box(&h[0, 0], m, &uv[0], side)
     return side[0], side[1]

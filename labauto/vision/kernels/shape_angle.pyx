@@ -294,6 +294,7 @@ def shape_angles(
     double[::1] area,
     double[::1] gap_fraction,
     double[::1] scratch,
+    int num_threads=1,
 ) -> None:
     """Fill the (K,) / (K, 2) outputs for the K contours ``points[offsets[k]:offsets[k + 1]]``.
 
@@ -323,7 +324,7 @@ def shape_angles(
             or d_alpha_median.shape[0] != n_contours or inside.shape[0] != n_contours \
             or area.shape[0] != n_contours or gap_fraction.shape[0] != n_contours:
         raise ValueError("closed and the outputs must have one entry per contour")
-    for k in prange(n_contours, nogil=True, schedule="dynamic"):
+    for k in prange(n_contours, nogil=True, schedule="dynamic", num_threads=num_threads):
         s = offsets[k]
         n = offsets[k + 1] - s
         if not _geometry(&points[s, 0], n, closed[k] != 0, open_min_area_ratio,
@@ -352,6 +353,7 @@ def polygon_centroids(
     double[:, ::1] centroid,
     double[::1] area,
     double[::1] gap_fraction,
+    int num_threads=1,
 ) -> None:
     """Fill centre of gravity (K, 2), area (K,) and gap fraction (K,) of the K contours.
 
@@ -370,7 +372,7 @@ def polygon_centroids(
             or centroid.shape[1] != 2 or area.shape[0] != n_contours \
             or gap_fraction.shape[0] != n_contours:
         raise ValueError("closed and the outputs must have one entry per contour")
-    for k in prange(n_contours, nogil=True, schedule="dynamic"):
+    for k in prange(n_contours, nogil=True, schedule="dynamic", num_threads=num_threads):
         s = offsets[k]
         if not _geometry(&points[s, 0], offsets[k + 1] - s, closed[k] != 0,
                          open_min_area_ratio, &centroid[k, 0], &area[k], &gap_fraction[k]):
@@ -384,6 +386,7 @@ def points_in_polygons(
     const double[:, ::1] points,
     const long long[::1] offsets,
     unsigned char[::1] inside,
+    int num_threads=1,
 ) -> None:
     """Fill ``inside[k]`` (uint8) with the even-odd test of query point k against polygon k.
 
@@ -398,6 +401,6 @@ def points_in_polygons(
     _check_offsets(offsets, n_points)
     if query.shape[0] != n_contours or inside.shape[0] != n_contours:
         raise ValueError("query and inside must have one entry per contour")
-    for k in prange(n_contours, nogil=True, schedule="dynamic"):
+    for k in prange(n_contours, nogil=True, schedule="dynamic", num_threads=num_threads):
         s = offsets[k]
         inside[k] = _inside(&points[s, 0], offsets[k + 1] - s, query[k, 0], query[k, 1])
