@@ -11,11 +11,13 @@ import cv2
 import numpy as np
 import pytest
 
+from labauto.synthetic.shapes import make_scene
 from labauto.vision.contours import ends_adjacent
 from labauto.vision.edges import (
     _NEIGHBOURS,
     _REMOVABLE,
     _work_map,
+    canny_edges,
     edge_contours,
     gradient_at,
     link_edges,
@@ -23,6 +25,7 @@ from labauto.vision.edges import (
     thin_edges,
     traces_to_chains,
 )
+from labauto.vision.gradient import color_gradient
 
 
 def _thin_reference(edges: np.ndarray, max_iter: int = 2) -> np.ndarray:
@@ -122,6 +125,45 @@ def test_thin_edges_matches_reference(seed: int, max_iter: int) -> None:
     h, w = (int(v) for v in rng.integers(1, 60, size=2))
     edges = _random_map(rng, h, w)
     np.testing.assert_array_equal(thin_edges(edges, max_iter), _thin_reference(edges, max_iter))
+
+
+@pytest.mark.parametrize("width", [1, 63, 64, 65, 127, 128, 130, 200])
+@pytest.mark.parametrize("density", [0.05, 0.5, 1.0])
+def test_link_and_thin_across_64_pixel_blocks(width: int, density: float) -> None:
+    """The kernel reads the edge map 64 pixels at a time: widths around that block size (a
+    partial block at the end of a row), empty, sparse and full blocks, edges on the border."""
+    rng = np.random.default_rng(width)
+    edges = ((rng.random((9, width)) < density) * 255).astype(np.uint8)
+    edges[4] = 255  # a full row: every block of it set
+    pts, offsets = link_edges(edges)
+    assert _as_list(pts, offsets) == _link_reference(edges)
+    for max_iter in (1, 2, 3):
+        np.testing.assert_array_equal(thin_edges(edges, max_iter), _thin_reference(edges, max_iter))
+    assert not _work_map(edges.shape).any()
+
+
+@pytest.mark.parametrize("seed", range(20))
+@pytest.mark.parametrize("max_iter", [2, 3, 5])
+def test_thin_edges_dense_maps_many_passes(seed: int, max_iter: int) -> None:
+    """Dense maps keep removing pixels in every pass, so a pixel kept earlier must be decided
+    again after a neighbour (of any class, in this pass or the last) was removed."""
+    rng = np.random.default_rng(500 + seed)
+    h, w = (int(v) for v in rng.integers(2, 100, size=2))
+    edges = ((rng.random((h, w)) < rng.uniform(0.3, 0.7)) * 255).astype(np.uint8)
+    np.testing.assert_array_equal(thin_edges(edges, max_iter), _thin_reference(edges, max_iter))
+
+
+def test_link_edges_on_a_scene_matches_reference() -> None:
+    """A full 1280x1024 scene through the colour Canny edges, as detect links it."""
+    gx, gy = color_gradient(make_scene(np.random.default_rng(3))[0], 0.7)
+    edges = canny_edges(gx, gy, 40.0, 100.0)
+    pts, offsets = link_edges(edges, 20)
+    assert _as_list(pts, offsets) == _link_reference(edges, 20)
+    points, _, grads, _ = edge_contours(edges, gx, gy, 20)
+    np.testing.assert_array_equal(points, _refine_reference(pts, gx, gy))
+    np.testing.assert_array_equal(
+        grads, np.column_stack((gx[pts[:, 1], pts[:, 0]], gy[pts[:, 1], pts[:, 0]]))
+    )
 
 
 @pytest.mark.parametrize(

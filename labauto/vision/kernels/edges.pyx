@@ -5,16 +5,21 @@ See :mod:`labauto.vision.edges` for the definitions. One call of :func:`link` go
 edge map to the finished chains:
 
 1. the edge pixels are collected in raster order into a zeroed padded work map (one-pixel zero
-   border, so a 3x3 neighbourhood never needs a bounds check);
+   border, so a 3x3 neighbourhood never needs a bounds check): 64 pixels at a time, a bit mask
+   of the nonzero ones from four SSE2 compares, then its set bits (a per-byte loop spends most
+   of its time on mispredicted branches: an edge map is ~1 % edges, in short runs);
 2. they are thinned in checkerboard classes (``thin_edges``): the same passes, in the same
-   order, as deciding every pixel of a class at once;
+   order, as deciding every pixel of a class at once. After the first pass only pixels next
+   to a removal (marked DIRTY) are decided again: the others would be kept as before;
 3. every 8-connected component, from its first pixel in raster order, gets the outer border
    trace of Suzuki and Abe, step for step as ``cv2.findContours`` (``RETR_CCOMP``,
    ``CHAIN_APPROX_NONE``) follows it; the trace becomes a chain (``traces_to_chains``: rotated
    to its first turnaround if traced out and back, each pixel at its first visit); components
    are emitted in reverse raster order of their first pixels, as ``findContours`` lists them;
 4. optionally the gradient at every point and the Devernay sub-pixel position (float32
-   arithmetic, as the numpy formulation of ``refine_subpixel``).
+   arithmetic, as the numpy formulation of ``refine_subpixel``), in chain order, with the
+   gradient rows of the point 16 ahead prefetched (a chain wanders over the image: without
+   the prefetch the loop mostly waits on memory).
 
 The work map is left all zero again (only the touched pixels are cleared), so the caller can
 keep one per image size instead of paying for a fresh image-sized allocation on every call.
@@ -26,12 +31,17 @@ from libc.string cimport memcpy
 
 import numpy as np
 
+cdef enum:
+    AHEAD = 16  # _sample_points: prefetch the gradient rows of the point this far ahead
+
+
 # marks in the work map: bit 0 edge pixel, the others are bookkeeping of the linker
 cdef enum:
     EDGE = 1
     IN_TRACE = 2  # met in the current trace, not yet emitted
     SEEN = 4  # emitted (first visit done)
     DONE = 8  # component already linked
+    DIRTY = 16  # thinning: a neighbour was removed since the pixel was last kept
 
 
 ctypedef struct Vec:
@@ -48,6 +58,25 @@ cdef inline void _init(Vec* v, Py_ssize_t cap) noexcept nogil:
     v.failed = v.data == NULL
     if v.failed:
         v.cap = 0
+
+
+cdef inline int _reserve(Vec* v, Py_ssize_t size) noexcept nogil:
+    """Make room for ``size`` values; -1 (and ``failed``) when out of memory."""
+    cdef Py_ssize_t cap = v.cap
+    cdef Py_ssize_t* grown
+    if size <= cap:
+        return 0
+    if v.failed:
+        return -1
+    while cap < size:
+        cap = 2 * cap
+    grown = <Py_ssize_t*>realloc(v.data, cap * sizeof(Py_ssize_t))
+    if grown == NULL:
+        v.failed = 1
+        return -1
+    v.data = grown
+    v.cap = cap
+    return 0
 
 
 cdef inline void _push(Vec* v, Py_ssize_t value) noexcept nogil:
@@ -94,45 +123,65 @@ cdef inline void _ring(Py_ssize_t stride, Py_ssize_t* ring) noexcept nogil:
 
 cdef extern from *:
     """
+    #include <emmintrin.h>
     static inline int labauto_ctz64(unsigned long long v) { return __builtin_ctzll(v); }
+
+    /* bit k set where p[k] != 0, k < 64: four SSE2 compares of 16 bytes with zero */
+    static inline unsigned long long labauto_nonzero64(const unsigned char* p) {
+        const __m128i zero = _mm_setzero_si128();
+        unsigned long long zeros = 0, bits;
+        for (int k = 0; k < 4; k++) {
+            bits = (unsigned)_mm_movemask_epi8(
+                _mm_cmpeq_epi8(_mm_loadu_si128((const __m128i*)(p + 16 * k)), zero));
+            zeros |= bits << (16 * k);
+        }
+        return ~zeros;
+    }
+
+    /* the same for the last n < 64 pixels of a row */
+    static inline unsigned long long labauto_nonzero_tail(const unsigned char* p, Py_ssize_t n) {
+        unsigned long long found = 0;
+        for (Py_ssize_t k = 0; k < n; k++) found |= (unsigned long long)(p[k] != 0) << k;
+        return found;
+    }
     """
+    unsigned long long _nonzero64 "labauto_nonzero64"(const unsigned char* p) noexcept nogil
+    unsigned long long _nonzero_tail "labauto_nonzero_tail"(
+        const unsigned char* p, Py_ssize_t n) noexcept nogil
     int _ctz "labauto_ctz64"(unsigned long long v) noexcept nogil
+    void _prefetch "__builtin_prefetch"(const void* address) noexcept nogil
 
 
-cdef inline unsigned long long _nonzero_bytes(unsigned long long word) noexcept nogil:
-    """0x80 in every byte of ``word`` that is nonzero, 0 elsewhere (no branches)."""
-    cdef unsigned long long low7 = 0x7F7F7F7F7F7F7F7FULL
-    return ((word & low7) + low7 | word) & ~low7
-
-
-cdef void _collect(
-    const unsigned char[:, ::1] edges, unsigned char* pad, Py_ssize_t stride, Vec* pixels
+cdef int _collect(
+    const unsigned char* edges, Py_ssize_t h, Py_ssize_t w, Py_ssize_t step, unsigned char* pad,
+    Py_ssize_t stride, Vec* pixels,
 ) noexcept nogil:
-    """Set EDGE at every nonzero pixel of ``edges`` in the padded map; list them in raster order.
+    """Set EDGE at every nonzero pixel of ``edges`` (HxW, rows ``step`` bytes apart) in the
+    padded map; list them in raster order. ``edges`` may be the interior of ``pad`` itself
+    (``thin``).
 
-    Reads 8 pixels at a time and visits only the nonzero bytes of a word (lowest first).
+    64 pixels at a time: a bit mask of the nonzero ones (SSE2 compares), then its set bits,
+    lowest first. Most blocks of an edge map are empty and cost one test. Returns -1 when out
+    of memory.
     """
-    cdef Py_ssize_t h = edges.shape[0], w = edges.shape[1], x, y, k, base
+    cdef Py_ssize_t x, y, at
     cdef const unsigned char* row
-    cdef unsigned long long word, found
+    cdef unsigned long long found
     for y in range(h):
-        row = &edges[y, 0]
-        base = (y + 1) * stride + 1
+        if pixels.cap - pixels.size < w and _reserve(pixels, pixels.size + w) < 0:
+            return -1
+        row = edges + y * step
+        at = (y + 1) * stride + 1  # padded index of row[0]
         x = 0
-        while x + 8 <= w:
-            memcpy(&word, row + x, 8)
-            if word != 0:
-                found = _nonzero_bytes(word)  # little-endian: byte k of the word is row[x + k]
-                while found != 0:
-                    k = x + (_ctz(found) >> 3)
-                    pad[base + k] = EDGE
-                    _push(pixels, base + k)
-                    found &= found - 1
-            x += 8
-        for k in range(x, w):
-            if row[k] != 0:
-                pad[base + k] = EDGE
-                _push(pixels, base + k)
+        while x < w:
+            found = _nonzero64(row + x) if x + 64 <= w else _nonzero_tail(row + x, w - x)
+            while found != 0:
+                pad[at + x + _ctz(found)] = EDGE
+                pixels.data[pixels.size] = at + x + _ctz(found)
+                pixels.size += 1
+                found &= found - 1
+            x += 64
+    return 0
 
 
 cdef int _thin(
@@ -144,12 +193,18 @@ cdef int _thin(
     ``pixels``: the set pixels, ascending. Class of padded pixel p: parity of its row, then
     parity of p itself (as ``thin_edges``). Two pixels of one class are never neighbours, so
     deciding them one after the other in place is deciding them at once.
+
+    A kept pixel is decided again in a later pass only if a neighbour was removed since (a
+    removal marks its neighbours DIRTY): with the same neighbourhood the table gives the same
+    answer. The first pass decides every pixel; Canny output then has few removals left, so
+    the second pass is mostly one load per pixel. The marks left at the end are cleared.
     """
     cdef Py_ssize_t ring[8]
     cdef Py_ssize_t begin[4]
     cdef Py_ssize_t end[4]
     cdef Py_ssize_t i, j, p, row_end
-    cdef int c, it, k, code, changed, odd_row, r
+    cdef int c, it, k, code, changed, odd_row
+    cdef Py_ssize_t q
     cdef Py_ssize_t* by_class
     cdef unsigned char* cls
     if n == 0 or max_iter <= 0:
@@ -189,17 +244,28 @@ cdef int _thin(
             j = begin[c]
             for i in range(begin[c], end[c]):
                 p = by_class[i]
+                by_class[j] = p  # kept pixels move to the front of their class
+                j += 1
+                if it > 0 and pad[p] == EDGE:
+                    continue  # no neighbour removed since this pixel was last kept
                 code = 0
                 for k in range(8):
                     code = code | ((pad[p + ring[k]] != 0) << k)
-                r = removable[code] != 0  # no branch: removals are rare and unpredictable
-                pad[p] = 1 - r
-                changed |= r
-                by_class[j] = p  # kept pixels move to the front of their class
-                j += 1 - r
+                if not removable[code]:
+                    pad[p] = EDGE
+                    continue
+                pad[p] = 0
+                j -= 1
+                changed = 1
+                for k in range(8):
+                    q = p + ring[k]
+                    pad[q] = pad[q] | (DIRTY if pad[q] != 0 else 0)
             end[c] = j
         if not changed:
             break
+    for c in range(4):  # marks set after a pixel's last decision
+        for i in range(begin[c], end[c]):
+            pad[by_class[i]] = EDGE
     free(by_class)
     return 0
 
@@ -213,7 +279,7 @@ def thin(unsigned char[:, ::1] padded, const unsigned char[::1] removable, int m
     removable : uint8 (256,), 1 where the 3x3 neighbourhood code makes the centre removable
     max_iter : maximum number of passes over the four classes
     """
-    cdef Py_ssize_t h = padded.shape[0], w = padded.shape[1], y, x
+    cdef Py_ssize_t h = padded.shape[0], w = padded.shape[1]
     cdef Vec pixels
     cdef int status = 0
     if removable.shape[0] != 256:
@@ -222,14 +288,12 @@ def thin(unsigned char[:, ::1] padded, const unsigned char[::1] removable, int m
         return
     with nogil:
         _init(&pixels, 1024)
-        for y in range(1, h - 1):
-            for x in range(1, w - 1):
-                if padded[y, x] != 0:
-                    _push(&pixels, y * w + x)
         if not pixels.failed:
+            status = _collect(&padded[1, 1], h - 2, w - 2, w, &padded[0, 0], w, &pixels)
+        if status == 0:
             status = _thin(&padded[0, 0], w, pixels.data, pixels.size, &removable[0], max_iter)
-        status = -1 if pixels.failed else status
         free(pixels.data)
+        status = -1 if pixels.failed else status
     if status < 0:
         raise MemoryError("thin: out of memory")
 
@@ -440,6 +504,38 @@ cdef void _emit_pixels(
         offsets[k + 1] = j
 
 
+cdef void _sample_points(
+    const Py_ssize_t* points, Py_ssize_t begin, Py_ssize_t end, Py_ssize_t stride,
+    const short* gx, const short* gy, Py_ssize_t h, Py_ssize_t w, bint subpixel,
+    double* out_points, float* out_gradients,
+) noexcept nogil:
+    """``_sample`` at the padded indices ``points[begin:end]`` (one-pixel border), written to
+    rows ``begin:end`` of ``out_points`` and ``out_gradients`` (N x 2 each).
+
+    The gradient at a point and at its neighbours above and below is prefetched AHEAD points
+    early: a chain wanders over the image, so its points' rows are mostly not in cache and the
+    loop would otherwise wait on memory.
+    """
+    cdef Py_ssize_t i, p, y
+    cdef double inverse = 1.0 / stride
+    for i in range(begin, end):
+        if i + AHEAD < end:
+            p = points[i + AHEAD]
+            y = _row_of(p, stride, inverse) - 1  # image row and index of that point
+            p = p - (y + 1) * stride - 1 + y * w
+            _prefetch(gx + p)
+            _prefetch(gy + p)
+            if 0 < y < h - 1:
+                _prefetch(gx + p - w)
+                _prefetch(gy + p - w)
+                _prefetch(gx + p + w)
+                _prefetch(gy + p + w)
+        p = points[i]
+        y = _row_of(p, stride, inverse)
+        _sample(gx, gy, h, w, p - y * stride - 1, y - 1, subpixel, out_points + 2 * i,
+                out_gradients + 2 * i)
+
+
 def link(
     const unsigned char[:, ::1] edges, unsigned char[:, ::1] work,
     const unsigned char[::1] removable, int max_iter, Py_ssize_t min_length,
@@ -465,8 +561,7 @@ def link(
     float32 (N, 2), bool (K,) (first and last pixel 8-neighbours, more than two pixels).
     """
     cdef Py_ssize_t h = edges.shape[0], w = edges.shape[1], stride = w + 2
-    cdef Py_ssize_t i, k, p, n, size, n_chains = 0, total = 0, j, first, last, y
-    cdef double inverse
+    cdef Py_ssize_t i, k, p, n, size, n_chains = 0, total = 0, j, first, last
     cdef Py_ssize_t ring[8]
     cdef Py_ssize_t deltas[16]
     cdef bint with_gradient = gx is not None
@@ -502,8 +597,8 @@ def link(
         chains.failed = 1
         status = -1
         if not (pixels.failed or trace.failed or stack.failed or starts.failed):
-            _collect(edges, pad, stride, &pixels)
-            if not pixels.failed:
+            status = _collect(&edges[0, 0], h, w, w, pad, stride, &pixels)
+            if status == 0:
                 status = _thin(pad, stride, pixels.data, pixels.size, &removable[0], max_iter)
         if status == 0:
             _init(&chains, pixels.size)
@@ -567,12 +662,8 @@ def link(
                     out_offsets[k + 1] = j
                     out_closed[k] = n > 2 and -1 <= first % stride - last % stride <= 1 \
                         and -1 <= first // stride - last // stride <= 1
-                inverse = 1.0 / stride
-                for i in range(total):
-                    p = ordered[i]
-                    y = _row_of(p, stride, inverse)
-                    _sample(&gx[0, 0], &gy[0, 0], h, w, p - y * stride - 1, y - 1, subpixel,
-                            &out_points[i, 0], &out_gradients[i, 0])
+                _sample_points(ordered, 0, total, stride, &gx[0, 0], &gy[0, 0], h, w, subpixel,
+                               &out_points[0, 0], &out_gradients[0, 0])
         if ordered == NULL:
             raise MemoryError("link: out of memory")
         return points, offsets, gradients, closed
