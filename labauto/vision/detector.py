@@ -8,8 +8,10 @@ Pipeline (sections 3.1-3.2 of the paper):
 2. the shape angle D_alpha (eq. 3) of every contour, its centroid and the centroid-inside test;
 3. a DES is a contour whose centroid is inside and whose D_alpha is below a threshold;
 4. a shape label for every object (harmonic analysis) and a geometric ellipse fit for every DES,
-   both vectorised over all contours of the image (``classify_shapes``,
-   ``fit_ellipses_geometric_batch``).
+   each one call for all contours of the image (``classify_shapes``, ``fit_selected_ellipses``).
+
+Every step's inner loop is a compiled kernel (:mod:`labauto.vision.kernels`) working on all
+contours of the image at once; the Python modules hold the definitions and the input checks.
 
 Coordinates: pixels, origin at the centre of the top-left pixel, x right, y down.
 """
