@@ -223,6 +223,24 @@ def test_polar_series_against_quadrature(seed: int, power: int) -> None:
         assert np.array_equal(a + 1j * b, got)  # the single-contour function: a batch of one
 
 
+def test_polar_series_with_edges_through_the_centre() -> None:
+    # an edge on a ray from the centre and a vertex at the centre (a "pac-man" whose mouth
+    # corner is the centre) add nothing; their vertices' weights cancel in the sums by parts
+    radial = np.array([[5.0, 0.0], [10.0, 0.0], [0.0, 10.0], [-10.0, 0.0], [0.0, -10.0]])
+    pacman = np.array(
+        [[0.0, 0.0], [10.0, 0.0], [7.0, 8.0], [-9.0, 6.0], [-6.0, -9.0], [0.0, -11.0]]
+    )
+    pts, off = _concat([radial, pacman])
+    centres = np.zeros((2, 2))
+    measured = measure_contours(pts, off, centroids=centres, n_r=8, n_rho=8)
+    assert np.all(measured.series_status == kernel.SERIES_OK)
+    assert np.array_equal(measured.values["winding"], [1.0, 1.0])
+    for k, c in enumerate((radial, pacman)):
+        for power, got in ((1, measured.r[k]), (-2, measured.rho[k])):
+            ref = _series_reference(c, centres[k], 8, power)
+            assert np.abs(got - ref).max() <= 1e-11 * abs(ref[0])
+
+
 def test_threads_do_not_change_results() -> None:
     gen = np.random.default_rng(5)
     contours = [_star_polygon(gen, int(gen.integers(5, 200))) for _ in range(60)]

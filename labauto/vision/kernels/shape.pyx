@@ -1,4 +1,5 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+# distutils: extra_compile_args = -fno-math-errno
 """Shape kernel: Table 1 descriptors and the exact polar series (eq. 4) of many contours.
 
 See :mod:`labauto.vision.descriptors` and :mod:`labauto.vision.harmonics` for the definitions
@@ -10,7 +11,10 @@ threads), drops repeated points, then computes
   there is no area, the semi-axes from the second moments, the perimeter;
 * the convex hull (monotone chain after a natural merge sort: an ordered contour is made of a
   few x-monotone runs) and the minimum-area box around it (rotating calipers);
-* optionally the Fourier coefficients of ``r`` and ``r^-2`` about the centre, exact per edge.
+* optionally the Fourier coefficients of ``r`` and ``r^-2`` about the centre, exact per edge
+  (``r^-2`` summed by parts over the vertices, see :func:`_series`).
+
+Compiled with ``-fno-math-errno`` (second line) so that loops with ``sqrt`` vectorise.
 
 Everything is float64 and per contour in a fixed order, so a contour's results do not depend on
 the other contours of the batch.
@@ -470,25 +474,27 @@ cdef inline void _differences(
         di[k] = (p0r[k] - p1r[k]) * inv_m[k]
 
 
-cdef inline void _add_rho(
-    double_r accr, double_r acci, cdouble_r dr, cdouble_r di, double hh, double ar, double ai,
-    int n,
+cdef inline void _add_vertex(
+    cdouble_r pr, cdouble_r pi, int m, double h, double gr, double gi, double_r hr, double_r hi,
+    double_r s1, double_r s2, double_r s3, double_r s4,
 ) noexcept nogil:
-    """acc_k += hh D_k + (ar + i ai)^* D_{k+2} + (ar + i ai) D_{k-2}, k = 0..n (dr, di point at
-    D_0; one vectorised loop)."""
-    cdef int k
-    for k in range(n + 1):
-        accr[k] += hh * dr[k] + (ar * dr[k + 2] + ai * di[k + 2]) + (
-            ar * dr[k - 2] - ai * di[k - 2]
-        )
-        acci[k] += hh * di[k] + (ar * di[k + 2] - ai * dr[k + 2]) + (
-            ar * di[k - 2] + ai * dr[k - 2]
-        )
+    """Add a vertex's powers w^p = pr + i pi (p = 1..m) with the real weight h and the complex
+    weight g = gr + i gi: H_p += h w^p and the four real products of g and w^p, from which
+    sum g w^p = (s1 - s2) + i (s3 + s4) and sum g conj(w^p) = (s1 + s2) + i (s4 - s3)
+    (one vectorised loop)."""
+    cdef int p
+    for p in range(1, m + 1):
+        hr[p] += h * pr[p]
+        hi[p] += h * pi[p]
+        s1[p] += gr * pr[p]
+        s2[p] += gi * pi[p]
+        s3[p] += gr * pi[p]
+        s4[p] += gi * pr[p]
 
 
 cdef int _series(
     const double* q, Py_ssize_t n, bint given, double cx, double cy, int n_r, int n_rho,
-    double* work, double* r, double* rho, double* out,
+    double* work, double* geo, double* r, double* rho, double* out,
 ) noexcept nogil:
     """Coefficients of r (harmonics 0..n_r) and r^-2 (0..n_rho) about the centre into r, rho
     (interleaved re, im), centre, star-shapedness and winding into out[10:14]; the status.
@@ -498,32 +504,53 @@ cdef int _series(
     asinh tan u, K_1 = u - i log cos u, K_n = 2 G_{n-1} - K_{n-2}); r contributes
     d e^{in phi} K_n and r^-2 e^{in phi} / d^2 (G_n / 2 + (G_{n+2} + G_{n-2}) / 4). With
     w = e^{i theta} = nu e^{iu} at the vertices, D_m = e^{im phi} G_m = (w1^m - w0^m) / (im)
-    (D_0 = u1 - u0, D_{-m} = conj(D_m)), so the powers are per vertex, shared by its two edges:
-    r^-2 adds (D_n / 2 + (conj(nu^2) D_{n+2} + nu^2 D_{n-2}) / 4) / d^2 and r adds d Q_n with
-    Q_n = e^{in phi} K_n = 2 nu D_{n-1} - nu^2 Q_{n-2}.
+    for m != 0 (D_0 = u1 - u0 = du), so the powers are per vertex, shared by its two edges.
+
+    r^-2: an edge adds h D_n + conj(a) D_{n+2} + a D_{n-2}, h = 1 / (2 d^2), a = nu^2 / (4 d^2).
+    Summed by parts, sum over edges c (w1^m - w0^m) = sum over vertices (c_in - c_out) w^m
+    (c_in, c_out: of the edges ending and starting at the vertex; 0 for an edge skipped), so
+    with H_m = sum (h_in - h_out) w^m and A_m = sum (a_in - a_out) w^m the contour's sums are
+    sum h D_m = H_m / (im), sum a D_m = A_m / (im) and sum conj(a) D_m = conj(A_{-m}) / (im),
+    and only the D_0 terms (sum h du, sum a du) are per edge: one pass over a vertex's powers
+    (:func:`_add_vertex`) instead of D_m and three complex products per edge and harmonic.
+
+    r: an edge adds d Q_n, Q_n = e^{in phi} K_n = 2 nu D_{n-1} - nu^2 Q_{n-2} (n_r is small: per
+    edge, with D_1..D_{n_r - 1}), Q_0 = K_0, Q_1 = nu K_1, Im K_1 = log(r1 / r0) from one log
+    per vertex.
     """
     cdef Py_ssize_t i, j
-    cdef int k, big_m = n_r - 1 if n_r - 1 > n_rho + 2 else n_rho + 2
+    cdef int k, p, big_m = n_r - 1 if n_r - 1 > n_rho + 2 else n_rho + 2
     cdef Py_ssize_t w = big_m + 3  # >= 4: _powers writes 0..3 at least
     cdef double* p0r = work  # powers of w at the edge's first vertex
     cdef double* p0i = work + w
     cdef double* p1r = work + 2 * w  # and at its second
     cdef double* p1i = work + 3 * w
-    cdef double* dr = work + 4 * w  # D_m at index m + 2, m = -2..big_m
+    cdef double* dr = work + 4 * w  # D_m at index m + 2, m = 0..n_r - 1 (for r)
     cdef double* di = work + 5 * w
     cdef double* inv_m = work + 6 * w
-    cdef double* accr = work + 7 * w  # r^-2 sums
-    cdef double* acci = accr + n_rho + 1
+    cdef double* hr = work + 7 * w  # vertex sums of r^-2 (_add_vertex), index p = 1..n_rho + 2
+    cdef double* hi = work + 8 * w
+    cdef double* s1 = work + 9 * w
+    cdef double* s2 = work + 10 * w
+    cdef double* s3 = work + 11 * w
+    cdef double* s4 = work + 12 * w
+    cdef double_r gx = geo  # per vertex: position about the centre (vertex 0 again at n), 1 / r
+    cdef double_r gy = geo + n + 1
+    cdef double_r gir = geo + 2 * n + 2
+    cdef double_r gnx = geo + 3 * n + 2  # per edge: unit normal nu, distance d
+    cdef double_r gny = geo + 4 * n + 2
+    cdef double_r gd = geo + 5 * n + 2
     cdef double* swap
     cdef double ac[3]
-    cdef double x0, y0, x1, y1, ir0, ir1, ex, ey, inv_len, nx, ny, d, scale2 = 0.0, thresh
-    cdef double c0, s0, c1, s1, du, net = 0.0, total = 0.0, a0, b0, a1, b1, num, den, inv
-    cdef double k0, k1, qpr, qpi, qcr, qci, tr, ti, n2r, n2i, hh, ar, ai, winding, norm
+    cdef double x0, y0, x1, y1, ir0, ir1, lr0 = 0.0, lr1 = 0.0, ux0, uy0, ex, ey, inv_len
+    cdef double nx, ny, d, scale2 = 0.0, thresh, c0, s0, c1, s1_, du, net = 0.0, total = 0.0
+    cdef double a0, b0, a1, b1, k0, k1, qpr, qpi, qcr, qci, tr, ti, n2r, n2i, hh, ar, ai
+    cdef double h_du = 0.0, ar_du = 0.0, ai_du = 0.0, h_prev = 0.0, ar_prev = 0.0, ai_prev = 0.0
+    cdef double h_first = 0.0, ar_first = 0.0, ai_first = 0.0, winding, norm
     for k in range(2 * (n_r + 1)):
         r[k] = 0.0
-    for k in range(n_rho + 1):
-        accr[k] = 0.0
-        acci[k] = 0.0
+    for k in range(6 * w):
+        hr[k] = 0.0
     for k in range(1, big_m + 1):
         inv_m[k] = 1.0 / k
     if not given:
@@ -536,67 +563,80 @@ cdef int _series(
         return S_SERIES_BAD_CENTRE
     out[10] = cx
     out[11] = cy
+    # vertices about the centre and 1 / r, then the edges' unit normals towards the edge and
+    # distances: two branch-free loops (square roots and divisions vectorised) before the
+    # edge loop with its atan2 and logs
     for i in range(n):
         x0 = q[2 * i] - cx
         y0 = q[2 * i + 1] - cy
-        d = x0 * x0 + y0 * y0
+        gx[i] = x0
+        gy[i] = y0
+        gir[i] = 1.0 / sqrt(x0 * x0 + y0 * y0)
+    for i in range(n):  # (a max does not vectorise)
+        d = gx[i] * gx[i] + gy[i] * gy[i]
         scale2 = d if d > scale2 else scale2
     thresh = 1e-12 * sqrt(scale2)  # edges on a line through the centre add nothing
-
-    x0 = q[0] - cx
-    y0 = q[1] - cy
-    ir0 = 1.0 / sqrt(x0 * x0 + y0 * y0)
-    _powers(x0 * ir0, y0 * ir0, big_m, p0r, p0i)
+    gx[n] = gx[0]
+    gy[n] = gy[0]
     for i in range(n):
-        j = i + 1 if i + 1 < n else 0
-        x1 = q[2 * j] - cx
-        y1 = q[2 * j + 1] - cy
-        ir1 = 1.0 / sqrt(x1 * x1 + y1 * y1)
-        _powers(x1 * ir1, y1 * ir1, big_m, p1r, p1i)
-        ex = x1 - x0
-        ey = y1 - y0
+        ex = gx[i + 1] - gx[i]
+        ey = gy[i + 1] - gy[i]
         inv_len = 1.0 / sqrt(ex * ex + ey * ey)
         nx = ey * inv_len
         ny = -ex * inv_len
-        d = x0 * nx + y0 * ny
-        if d < 0.0:  # make nu = (nx, ny) point from the centre to the edge
-            nx = -nx
-            ny = -ny
-            d = -d
+        d = gx[i] * nx + gy[i] * ny
+        gnx[i] = -nx if d < 0.0 else nx  # nu = (nx, ny) points from the centre to the edge
+        gny[i] = -ny if d < 0.0 else ny
+        gd[i] = -d if d < 0.0 else d
+
+    x0 = gx[0]
+    y0 = gy[0]
+    ir0 = gir[0]
+    if n_r >= 0:
+        lr0 = -log(ir0)
+    ux0 = x0 * ir0
+    uy0 = y0 * ir0
+    _powers(ux0, uy0, big_m, p0r, p0i)
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        x1 = gx[j]
+        y1 = gy[j]
+        ir1 = gir[j]
+        if n_r >= 0:
+            lr1 = -log(ir1)
+        _powers(x1 * ir1, y1 * ir1, big_m, p1r, p1i)
+        nx = gnx[i]
+        ny = gny[i]
+        d = gd[i]
+        hh = 0.0
+        ar = 0.0
+        ai = 0.0
         if d > thresh:
             c0 = d * ir0  # cos and sin of u at both ends
             s0 = (y0 * nx - x0 * ny) * ir0
             c1 = d * ir1
-            s1 = (y1 * nx - x1 * ny) * ir1
-            du = atan2(s1 * c0 - c1 * s0, c1 * c0 + s1 * s0)  # each edge subtends less than pi
+            s1_ = (y1 * nx - x1 * ny) * ir1
+            du = atan2(s1_ * c0 - c1 * s0, c1 * c0 + s1_ * s0)  # each edge subtends less than pi
             net += du
             total += fabs(du)
-            _differences(p0r, p0i, p1r, p1i, inv_m, big_m, dr + 2, di + 2)
-            dr[2] = du
-            di[2] = 0.0
-            dr[1] = dr[3]
-            di[1] = -di[3]
-            dr[0] = dr[4]
-            di[0] = -di[4]
             n2r = nx * nx - ny * ny  # nu^2
             n2i = 2.0 * nx * ny
-            if n_rho >= 0:
-                hh = 0.5 / (d * d)
-                ar = 0.5 * hh * n2r  # nu^2 / (4 d^2)
-                ai = 0.5 * hh * n2i
-                _add_rho(accr, acci, dr + 2, di + 2, hh, ar, ai, n_rho)
+            hh = 0.5 / (d * d)
+            ar = 0.5 * hh * n2r  # nu^2 / (4 d^2)
+            ai = 0.5 * hh * n2i
+            h_du += hh * du
+            ar_du += ar * du
+            ai_du += ai * du
             if n_r >= 0:
                 # K_0 = asinh(tan u1) - asinh(tan u0) = log(e1 / e0), e = (1 + sin u) / cos u,
-                # or cos u / (1 - sin u) without cancellation for sin u < 0; Im K_1 = log(c0 / c1)
+                # or cos u / (1 - sin u) without cancellation for sin u < 0
                 a0 = 1.0 + s0 if s0 >= 0.0 else c0
                 b0 = c0 if s0 >= 0.0 else 1.0 - s0
-                a1 = 1.0 + s1 if s1 >= 0.0 else c1
-                b1 = c1 if s1 >= 0.0 else 1.0 - s1
-                num = a1 * b0
-                den = b1 * a0
-                inv = 1.0 / (den * c1)
-                k0 = log(num * c1 * inv)
-                k1 = log(c0 * den * inv)
+                a1 = 1.0 + s1_ if s1_ >= 0.0 else c1
+                b1 = c1 if s1_ >= 0.0 else 1.0 - s1_
+                k0 = log((a1 * b0) / (b1 * a0))
+                k1 = lr1 - lr0  # log(cos u0 / cos u1)
+                _differences(p0r, p0i, p1r, p1i, inv_m, n_r - 1, dr + 2, di + 2)
                 qpr = k0  # Q_0
                 qpi = 0.0
                 qcr = nx * du - ny * k1  # Q_1 = nu K_1
@@ -611,6 +651,20 @@ cdef int _series(
                         qci = ti
                     r[2 * k] += d * (qpr if k == 0 else qcr)
                     r[2 * k + 1] += d * (qpi if k == 0 else qci)
+        if i == 0:  # vertex 0 last, when its incoming edge is known
+            h_first = hh
+            ar_first = ar
+            ai_first = ai
+        elif n_rho >= 0 and (h_prev != hh or ar_prev != ar or ai_prev != ai):
+            # vertex i: in edge i - 1, out edge i (both skipped: nothing, the vertex may be the
+            # centre itself)
+            _add_vertex(
+                p0r, p0i, n_rho + 2, h_prev - hh, ar_prev - ar, ai_prev - ai, hr, hi, s1, s2,
+                s3, s4,
+            )
+        h_prev = hh
+        ar_prev = ar
+        ai_prev = ai
         swap = p0r
         p0r = p1r
         p1r = swap
@@ -620,6 +674,13 @@ cdef int _series(
         x0 = x1
         y0 = y1
         ir0 = ir1
+        lr0 = lr1
+    if n_rho >= 0 and (h_prev != h_first or ar_prev != ar_first or ai_prev != ai_first):
+        _powers(ux0, uy0, big_m, p0r, p0i)
+        _add_vertex(
+            p0r, p0i, n_rho + 2, h_prev - h_first, ar_prev - ar_first, ai_prev - ai_first, hr,
+            hi, s1, s2, s3, s4,
+        )
 
     winding = nearbyint(net / (2.0 * PI))
     out[12] = fabs(net) / total if total > 0.0 else 0.0
@@ -634,8 +695,31 @@ cdef int _series(
     for k in range(2 * (n_r + 1)):
         r[k] *= norm
     for k in range(n_rho + 1):
-        rho[2 * k] = accr[k] * norm
-        rho[2 * k + 1] = acci[k] * norm
+        # sum h D_k: H_k / (ik)
+        if k == 0:
+            tr = h_du
+            ti = 0.0
+        else:
+            tr = hi[k] * inv_m[k]
+            ti = -hr[k] * inv_m[k]
+        # sum conj(a) D_{k+2}: conj(A_{-p}) / (ip), p = k + 2
+        p = k + 2
+        tr += (s3[p] - s4[p]) * inv_m[p]
+        ti -= (s1[p] + s2[p]) * inv_m[p]
+        # sum a D_{k-2}: A_p / (ip) for p = k - 2 > 0, A_{-p} / (-ip) for p = 2 - k > 0
+        if k == 2:
+            tr += ar_du
+            ti += ai_du
+        elif k > 2:
+            p = k - 2
+            tr += (s3[p] + s4[p]) * inv_m[p]
+            ti -= (s1[p] - s2[p]) * inv_m[p]
+        else:
+            p = 2 - k
+            tr += (s3[p] - s4[p]) * inv_m[p]
+            ti += (s1[p] + s2[p]) * inv_m[p]
+        rho[2 * k] = tr * norm
+        rho[2 * k + 1] = ti * norm
     if n_r >= 0:
         r[1] = 0.0
     if n_rho >= 0:
@@ -653,7 +737,7 @@ cdef void _contour(
     signed char* series_status,
 ) noexcept nogil:
     """Everything about one contour (buf: 8 max_n + 2 doubles, then the work of the hull,
-    4 max_n + 4, and of the series, 7 (big_m + 3) + 2 (n_rho + 1), sharing their place)."""
+    4 max_n + 4, and of the series, 13 (big_m + 3), sharing their place)."""
     cdef Py_ssize_t i, n
     cdef int nh = n_r if n_r > n_rho else n_rho
     cdef double* q = buf
@@ -683,7 +767,9 @@ cdef void _contour(
             for i in range(NV):
                 out[i] = NAN
     if want_series and nh >= 0 and not (isfinite(max_elongation) and out[8] >= max_elongation):
-        series_status[0] = _series(q, n, given, cx, cy, n_r, n_rho, work, r, rho, out)
+        series_status[0] = _series(
+            q, n, given, cx, cy, n_r, n_rho, work, buf + 2 * max_n, r, rho, out
+        )
 
 
 def measure_contours(
@@ -749,7 +835,7 @@ def measure_contours(
     cdef Py_ssize_t* runs
     if k_total == 0:
         return status_arr, series_arr, values_arr, r_arr, rho_arr
-    n_buf = 8 * max_n + 2 + max(4 * max_n + 4, 7 * (big_m + 3) + 2 * (n_rho + 1)) + 8
+    n_buf = 8 * max_n + 2 + max(4 * max_n + 4, 13 * (big_m + 3)) + 8
     nt = max(num_threads, 1) if k_total >= 16 else 1
     with nogil, parallel(num_threads=nt):
         buf = <double*> malloc(n_buf * sizeof(double))
