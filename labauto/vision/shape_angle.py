@@ -41,8 +41,9 @@ it does not reject squares, triangles or 5-point stars whose centroid is inside 
 the harmonic shape label tells those apart (the paper: "the square itself seems to be a problem").
 
 The loops over points are one compiled call per image for all contours
-(:mod:`labauto.vision.kernels.shape_angle`: quickselect for the medians, numpy's summation order
-for the sums, so the results equal the formulas above evaluated with numpy).
+(:mod:`labauto.vision.kernels.shape_angle`: plain sums in point order, quickselect for the
+medians). It evaluates alpha_i as ``atan2(|g_i x m_i|, |g_i . m_i|)``, the same angle, which
+unlike ``arccos`` stays accurate to rounding near 0 degrees and needs no norms.
 """
 
 from __future__ import annotations

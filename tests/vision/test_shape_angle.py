@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import statistics
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -148,7 +149,7 @@ def test_vectorised_equals_one_by_one(rng: np.random.Generator) -> None:
 def _alpha(pts: np.ndarray, g: np.ndarray, c: np.ndarray) -> np.ndarray:
     m = c - pts
     cos = np.abs((g * m).sum(1)) / (np.hypot(*g.T) * np.hypot(*m.T))
-    return np.degrees(np.arccos(np.minimum(cos, 1.0)))
+    return np.degrees(np.arccos(np.minimum(cos, 1.0)))  # eq. 3 as written
 
 
 def test_polygon_centroid_and_inside() -> None:
@@ -183,6 +184,20 @@ def test_bad_input_is_rejected() -> None:
 # --- the compiled kernel against a plain-Python reference ---------------------------------------
 
 
+def _exact_alpha(g: tuple[float, float], m: tuple[float, float]) -> float:
+    """Eq. 3's angle (degrees, 90 without direction) from the exact dot and cross products.
+
+    ``atan2(|g x m|, |g . m|)`` is eq. 3's ``arccos(|g . m| / (|g| |m|))``, but well-conditioned
+    near 0 degrees too, where ``arccos`` turns a rounding of the cosine into up to 1e-8 rad.
+    """
+    (gx, gy), (mx, my) = [[Fraction(v) for v in pair] for pair in (g, m)]
+    dot, cross = abs(gx * mx + gy * my), abs(gx * my - gy * mx)
+    if dot == cross == 0:
+        return 90.0
+    scale = max(dot, cross)  # exact ratios of magnitude <= 1: no overflow or underflow
+    return math.degrees(math.atan2(float(cross / scale), float(dot / scale)))
+
+
 def _reference(pts: np.ndarray, grads: np.ndarray, closed: bool) -> dict:
     """Eq. 3 and the module's choices for one contour, written out in plain Python."""
     n = len(pts)
@@ -202,12 +217,10 @@ def _reference(pts: np.ndarray, grads: np.ndarray, closed: bool) -> dict:
         centroid = (mx + cx / (3 * twice_area), my + cy / (3 * twice_area))
     else:
         centroid = (mx, my)
-    alphas = []
-    for (x, y), (gx, gy) in zip(pts.tolist(), grads.tolist(), strict=True):
-        vx, vy = centroid[0] - x, centroid[1] - y
-        norm = math.hypot(gx, gy) * math.hypot(vx, vy)
-        cos = min(abs(gx * vx + gy * vy) / norm, 1.0) if norm > 0 else 0.0
-        alphas.append(math.degrees(math.acos(cos)))
+    alphas = [
+        _exact_alpha(g, (centroid[0] - x, centroid[1] - y))
+        for (x, y), g in zip(pts.tolist(), grads.tolist(), strict=True)
+    ]
     hits = 0
     for i in range(n):
         (x0, y0), (x1, y1) = (xs[i], ys[i]), (xs[(i + 1) % n], ys[(i + 1) % n])
@@ -259,7 +272,7 @@ def _check_against_reference(
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_kernel_matches_plain_python_reference(rng: np.random.Generator, dtype: type) -> None:
-    # sizes around numpy's pairwise blocks (8, 128) and beyond: 1000+ points take the recursion
+    # small and large contours, odd and even counts, up to a few thousand points
     sizes = [3, 4, 7, 8, 9, 16, 17, 127, 128, 129, 130, 256, 257, 300, 1031, 2500]
     sizes += rng.integers(3, 400, 40).tolist()
     contours, grads = _random_contours(rng, sizes)
@@ -308,11 +321,7 @@ def test_contours_touching_the_image_border(rng: np.random.Generator) -> None:
 
 
 def test_median_with_ties_and_orders(rng: np.random.Generator) -> None:
-    """The selection gives the median for sorted, reversed, constant and tied angles.
-
-    (No angle near 0: there arccos turns a rounding difference of 1e-16 in the cosine into
-    1e-8 rad, and the reference's centroid differs from the kernel's in the last bits.)
-    """
+    """The selection gives the median for sorted, reversed, constant and tied angles."""
     n = 301
     t = np.linspace(0, 2 * np.pi, n, endpoint=False)
     circle = np.column_stack((100 * np.cos(t), 100 * np.sin(t))) + 200
@@ -325,6 +334,7 @@ def test_median_with_ties_and_orders(rng: np.random.Generator) -> None:
         "constant": np.full(n, 0.3),
         "two values": np.where(rng.random(n) < 0.5, 0.1, 1.2),
         "few values": rng.choice([0.01, 0.5, 1.0, np.pi / 2], n),
+        "near zero": rng.uniform(0, 1e-7, n),
         "random": angle,
     }
     for name, a in mixes.items():
@@ -358,25 +368,54 @@ def test_geometry_functions_match_reference(rng: np.random.Generator) -> None:
     assert np.array_equal(closed_default, polygon_centroids(pts, offsets, ends)[0])
 
 
-def test_sums_in_numpy_order(rng: np.random.Generator) -> None:
-    """Centroid and area equal the numpy formulas (``np.add.reduceat``) to the last bit."""
+def test_sums_against_exact_arithmetic(rng: np.random.Generator) -> None:
+    """Centroid and area equal the exact (rational) values to about 1e-15 relative.
+
+    (They used to equal numpy's ``np.add.reduceat`` to the last bit; the kernel now sums in
+    point order relative to the first point, so only rounding is pinned.)
+    """
     contours, _ = _random_contours(rng, [3, 9, 130, 700, 2049])
-    pts = np.vstack(contours)
     offsets = np.concatenate(([0], np.cumsum([len(c) for c in contours])))
-    starts, counts = offsets[:-1], np.diff(offsets)
     closed = np.ones(len(contours), bool)
-    mean = np.add.reduceat(pts, starts, axis=0) / counts[:, None]
-    rel = pts - np.repeat(mean, counts, axis=0)
-    nxt = np.arange(1, len(pts) + 1)
-    nxt[offsets[1:] - 1] = starts
-    x, y = rel[:, 0], rel[:, 1]
-    cross = x * y[nxt] - x[nxt] * y
-    twice_area = np.add.reduceat(cross, starts)
-    cx = np.add.reduceat((x + x[nxt]) * cross, starts)
-    cy = np.add.reduceat((y + y[nxt]) * cross, starts)
-    centroid, area = polygon_centroids(pts, offsets, closed)
-    assert np.array_equal(area, np.abs(twice_area) / 2.0)
-    assert np.array_equal(centroid, mean + np.column_stack((cx, cy)) / (3.0 * twice_area)[:, None])
+    centroid, area = polygon_centroids(np.vstack(contours), offsets, closed)
+    for k, pts in enumerate(contours):
+        xs = [Fraction(v) for v in pts[:, 0]]
+        ys = [Fraction(v) for v in pts[:, 1]]
+        twice = cx = cy = Fraction(0)
+        for i in range(len(xs)):
+            j = (i + 1) % len(xs)
+            cross = xs[i] * ys[j] - xs[j] * ys[i]
+            twice += cross
+            cx += (xs[i] + xs[j]) * cross
+            cy += (ys[i] + ys[j]) * cross
+        assert area[k] == pytest.approx(float(abs(twice) / 2), rel=1e-13), k
+        exact = (float(cx / (3 * twice)), float(cy / (3 * twice)))
+        assert tuple(centroid[k]) == pytest.approx(exact, rel=1e-14, abs=1e-12), k
+
+
+@pytest.mark.parametrize("scale", [1e-150, 1e-3, 1.0, 300.0, 1e150])
+def test_angles_exact_near_0_45_and_90_degrees(scale: float) -> None:
+    """Every alpha of a square whose gradients are its centroid vectors turned by theta.
+
+    The kernel's angle is accurate to rounding at any theta and any gradient scale, including
+    near 0 degrees (where eq. 3's ``arccos`` form is off by up to 1e-8 rad) and 90 degrees.
+    """
+    square = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]])  # centroid (2, 2) exact
+    m = np.array([2.0, 2.0]) - square
+    for theta in (0.0, 1e-12, 1e-9, 1e-6, 0.3, np.pi / 4, 1.2, np.pi / 2 - 1e-9, np.pi / 2):
+        for sign in (1.0, -1.0):  # polarity
+            c, s = np.cos(theta), np.sin(theta)
+            g = (
+                sign
+                * scale
+                * np.column_stack((c * m[:, 0] - s * m[:, 1], s * m[:, 0] + c * m[:, 1]))
+            )
+            median, mean, centroid, _ = shape_angle(square, g, closed=True)
+            assert centroid == (2.0, 2.0)
+            ref = sorted(_exact_alpha(tuple(gi), tuple(mi)) for gi, mi in zip(g, m, strict=True))
+            assert median == pytest.approx((ref[1] + ref[2]) / 2, rel=1e-14, abs=1e-300), theta
+            assert mean == pytest.approx(sum(ref) / 4, rel=1e-14, abs=1e-300), theta
+            assert median == pytest.approx(np.degrees(theta), rel=1e-9, abs=1e-13), theta
 
 
 def test_empty_input() -> None:

@@ -2,21 +2,26 @@
 """Shape angle kernel (eq. 3): centroid, area, gap, D_alpha mean and median, centroid inside.
 
 See :mod:`labauto.vision.shape_angle` for the definitions and the choices made. One call handles
-all K contours of an image; contours are shared among threads. Per contour: the mean of the
-points, the polygon moments (centred on that mean), the length along the points, then one pass
-for the deviation angles and the even-odd crossing count of the centroid, and the median of the
-angles by selection (Hoare's quickselect, O(n) expected; the remaining range is sorted if the
-pivots keep failing, so O(n log n) at worst).
+all K contours of an image; contours are shared among threads. Per contour:
 
-The sums over a contour's points are numpy's (``np.add.reduceat``: the first term plus the
-pairwise sum of the rest, 8 accumulators in blocks of at most 128) and the sum of the angles
-runs in point order (``np.bincount``), so the results equal the numpy formulas of the module's
-documentation to the last bit, except that ``acos`` may differ from numpy's ``arccos`` in the
-last place.
+1. geometry, one loop over the points: the polygon moments, the sums for the mean and spread of
+   the points, and the length along them. Coordinates are taken relative to the first point:
+   the terms are then of the contour's size, not of its position in the image, which keeps the
+   sums as accurate as centring on the mean without a pass for the mean, and the two edges at
+   the first point (the closing one included) add nothing. Plain sums in point order.
+2. the deviation angles; then one loop for their sum (point order) and the even-odd crossings
+   of the centroid's ray.
+3. the median of the angles by quickselect (O(n) expected, branchless partitions; the remaining
+   range is sorted if the pivots keep failing, so O(n log n) at worst).
+
+The angle is ``atan2(|g x m|, |g . m|)``: the same angle as eq. 3's ``arccos(|g . m| / (|g|
+|m|))`` but well-conditioned everywhere (``arccos`` near 0 degrees turns a rounding of the cosine
+into up to 1e-8 rad), scale-free (no norms to overflow) and accurate to a few ulp (the C
+library's ``atan2``).
 """
 
 from cython.parallel cimport prange
-from libc.math cimport M_PI, acos, fabs, hypot, isfinite
+from libc.math cimport M_PI, atan2, fabs, isfinite, sqrt
 from libc.stdlib cimport qsort
 
 ctypedef fused grad_t:
@@ -24,125 +29,8 @@ ctypedef fused grad_t:
     double
 
 cdef double DEGREES = 180.0 / M_PI
-# numpy's pairwise summation: blocks of at most this many terms, 8 accumulators in a block
-cdef Py_ssize_t PW_BLOCKSIZE = 128
 # quickselect rounds on one contour before the remaining range is sorted instead
 cdef int MAX_ROUNDS = 64
-
-
-cdef struct Sums:
-    double a, b, c, d
-
-
-# --- numpy's pairwise sums of per-point terms -------------------------------------------------
-
-cdef inline void _mean_terms(const double* p, Py_ssize_t i, double* t) noexcept nogil:
-    t[0] = p[2 * i]
-    t[1] = p[2 * i + 1]
-
-
-cdef inline void _moment_terms(
-    const double* p, Py_ssize_t n, double mx, double my, Py_ssize_t i, double* t
-) noexcept nogil:
-    """Polygon terms of edge i -> i + 1 (the last point joins the first), centred on (mx, my)."""
-    cdef Py_ssize_t j = i + 1 if i + 1 < n else 0
-    cdef double x = p[2 * i] - mx, y = p[2 * i + 1] - my
-    cdef double xn = p[2 * j] - mx, yn = p[2 * j + 1] - my
-    cdef double cross = x * yn - xn * y
-    t[0] = cross
-    t[1] = (x + xn) * cross
-    t[2] = (y + yn) * cross
-    t[3] = x * x + y * y
-
-
-cdef inline void _step_terms(const double* p, Py_ssize_t n, Py_ssize_t i, double* t) noexcept nogil:
-    """Length of the step i -> i + 1; 0 from the last point (no step to the next contour)."""
-    t[0] = hypot(p[2 * i + 2] - p[2 * i], p[2 * i + 3] - p[2 * i + 1]) if i + 1 < n else 0.0
-
-
-cdef inline void _terms(
-    int kind, const double* p, Py_ssize_t n, double mx, double my, Py_ssize_t i, double* t
-) noexcept nogil:
-    if kind == 0:
-        _mean_terms(p, i, t)
-    elif kind == 1:
-        _moment_terms(p, n, mx, my, i, t)
-    else:
-        _step_terms(p, n, i, t)
-
-
-cdef Sums _pairwise(
-    int kind, int m, const double* p, Py_ssize_t n, double mx, double my,
-    Py_ssize_t lo, Py_ssize_t hi,
-) noexcept nogil:
-    """numpy's pairwise sums over terms lo..hi-1 of ``m`` (<= 4) per-point quantities."""
-    cdef Sums out
-    cdef double r[4][8]
-    cdef double t[4]
-    cdef double res[4]
-    cdef Py_ssize_t count = hi - lo, i, half
-    cdef int j, q
-    cdef Sums left, right
-    if count < 8:
-        for q in range(4):
-            res[q] = 0.0
-        for i in range(lo, hi):
-            _terms(kind, p, n, mx, my, i, t)
-            for q in range(m):
-                res[q] = res[q] + t[q]
-    elif count <= PW_BLOCKSIZE:
-        for j in range(8):
-            _terms(kind, p, n, mx, my, lo + j, t)
-            for q in range(m):
-                r[q][j] = t[q]
-        i = lo + 8
-        while i < hi - count % 8:
-            for j in range(8):
-                _terms(kind, p, n, mx, my, i + j, t)
-                for q in range(m):
-                    r[q][j] = r[q][j] + t[q]
-            i = i + 8
-        for q in range(m):
-            res[q] = ((r[q][0] + r[q][1]) + (r[q][2] + r[q][3])) + (
-                (r[q][4] + r[q][5]) + (r[q][6] + r[q][7])
-            )
-        while i < hi:
-            _terms(kind, p, n, mx, my, i, t)
-            for q in range(m):
-                res[q] = res[q] + t[q]
-            i = i + 1
-    else:
-        half = count // 2
-        half = half - half % 8
-        left = _pairwise(kind, m, p, n, mx, my, lo, lo + half)
-        right = _pairwise(kind, m, p, n, mx, my, lo + half, hi)
-        out.a = left.a + right.a
-        out.b = left.b + right.b
-        out.c = left.c + right.c
-        out.d = left.d + right.d
-        return out
-    out.a = res[0]
-    out.b = res[1] if m > 1 else 0.0
-    out.c = res[2] if m > 2 else 0.0
-    out.d = res[3] if m > 3 else 0.0
-    return out
-
-
-cdef Sums _reduceat(
-    int kind, int m, const double* p, Py_ssize_t n, double mx, double my
-) noexcept nogil:
-    """``np.add.reduceat`` of one contour's terms: the first term plus the pairwise rest."""
-    cdef double t[4]
-    cdef Sums out = _pairwise(kind, m, p, n, mx, my, 1, n)
-    _terms(kind, p, n, mx, my, 0, t)
-    out.a = t[0] + out.a
-    if m > 1:
-        out.b = t[1] + out.b
-    if m > 2:
-        out.c = t[2] + out.c
-    if m > 3:
-        out.d = t[3] + out.d
-    return out
 
 
 # --- one contour --------------------------------------------------------------------------------
@@ -154,69 +42,97 @@ cdef bint _geometry(
     """Centre of gravity, polygon area and gap fraction of one contour of ``n`` interleaved
     ``(x, y)`` points (``open_ratio``: see ``OPEN_MIN_AREA_RATIO``). Returns whether all
     coordinates are finite."""
-    cdef Sums s = _reduceat(0, 2, p, n, 0.0, 0.0)
-    cdef double mx = s.a / n, my = s.b / n
-    cdef double twice_area, spread, min_ratio, safe, length, chord, total
-    if not (isfinite(s.a) and isfinite(s.b)):
+    cdef double x0 = p[0], y0 = p[1]
+    cdef double sx = 0.0, sy = 0.0, ss = 0.0, twice_area = 0.0, moment_x = 0.0, moment_y = 0.0
+    cdef double length = 0.0, x, y, xn, yn, cross, spread, min_ratio, chord, total
+    cdef Py_ssize_t i
+    # edge i -> i + 1 relative to the first point; the closing edge (last -> first) adds 0
+    for i in range(n - 1):
+        x = p[2 * i] - x0
+        y = p[2 * i + 1] - y0
+        xn = p[2 * i + 2] - x0
+        yn = p[2 * i + 3] - y0
+        sx = sx + x
+        sy = sy + y
+        ss = ss + (x * x + y * y)
+        cross = x * yn - xn * y
+        twice_area = twice_area + cross
+        moment_x = moment_x + (x + xn) * cross
+        moment_y = moment_y + (y + yn) * cross
+        if not closed:
+            length = length + sqrt((xn - x) * (xn - x) + (yn - y) * (yn - y))
+    x = p[2 * n - 2] - x0  # the last point
+    y = p[2 * n - 1] - y0
+    sx = sx + x
+    sy = sy + y
+    ss = ss + (x * x + y * y)
+    if not (isfinite(sx) and isfinite(sy)):
         return False
-    s = _reduceat(1, 4, p, n, mx, my)
-    twice_area = s.a
-    spread = s.d / n
+    spread = (ss - (sx * sx + sy * sy) / n) / n  # mean squared distance from the mean
     # open contours: the chord-closed polygon if it encloses a real area (a disk has
     # area / spread = pi, a straight line 0), else the points' mean
     min_ratio = 1e-6 if closed else open_ratio
-    if fabs(twice_area) / 2.0 > min_ratio * spread:
-        safe = 3.0 * twice_area
-        centroid[0] = mx + s.b / safe
-        centroid[1] = my + s.c / safe
-    else:
-        centroid[0] = mx + 0.0
-        centroid[1] = my + 0.0
     area[0] = fabs(twice_area) / 2.0
-    if closed:
-        gap[0] = 0.0
+    if area[0] > min_ratio * spread:
+        centroid[0] = x0 + moment_x / (3.0 * twice_area)
+        centroid[1] = y0 + moment_y / (3.0 * twice_area)
     else:
-        length = _reduceat(2, 1, p, n, 0.0, 0.0).a
-        chord = hypot(p[2 * n - 2] - p[0], p[2 * n - 1] - p[1])
-        total = length + chord
-        gap[0] = chord / total if total > 0 else 0.0
+        centroid[0] = x0 + sx / n
+        centroid[1] = y0 + sy / n
+    chord = sqrt(x * x + y * y)
+    total = length + chord
+    gap[0] = chord / total if not closed and total > 0 else 0.0
     return True
+
+
+cdef inline int _crosses(
+    double x0, double y0, double x1, double y1, double qx, double qy
+) noexcept nogil:
+    """1 if the edge (x0, y0) -> (x1, y1) crosses the ray from (qx, qy) towards +x, else 0."""
+    return (y0 > qy) != (y1 > qy) and qx < x0 + (qy - y0) * (x1 - x0) / (y1 - y0)
 
 
 cdef bint _inside(const double* p, Py_ssize_t n, double qx, double qy) noexcept nogil:
     """Even-odd test of (qx, qy) against the polygon through the points (last joins first)."""
-    cdef Py_ssize_t i, j
-    cdef int hits = 0
-    cdef double x0, y0, x1, y1
-    for i in range(n):
-        j = i + 1 if i + 1 < n else 0
-        x0 = p[2 * i]
-        y0 = p[2 * i + 1]
-        x1 = p[2 * j]
-        y1 = p[2 * j + 1]
-        if (y0 > qy) != (y1 > qy) and qx < x0 + (qy - y0) * (x1 - x0) / (y1 - y0):
-            hits = hits ^ 1
+    cdef Py_ssize_t i
+    cdef int hits = _crosses(p[2 * n - 2], p[2 * n - 1], p[0], p[1], qx, qy)
+    for i in range(1, n):
+        hits = hits ^ _crosses(p[2 * i - 2], p[2 * i - 1], p[2 * i], p[2 * i + 1], qx, qy)
     return hits != 0
 
 
+cdef inline double _alpha(double gx, double gy, double mx, double my) noexcept nogil:
+    """Deviation angle ``atan2(|g x m|, |g . m|)`` (degrees) of (gx, gy) from (mx, my); 90 if
+    either is 0."""
+    cdef double dot = fabs(gx * mx + gy * my), cross = fabs(gx * my - gy * mx)
+    if dot == 0.0 and cross == 0.0:
+        return 90.0
+    return atan2(cross, dot) * DEGREES
+
+
 cdef bint _angles(
-    const double* p, const grad_t* g, Py_ssize_t n, double cx, double cy, double* alpha
+    const double* p, const grad_t* g, Py_ssize_t n, double cx, double cy,
+    double* alpha, double* total, bint* inside,
 ) noexcept nogil:
-    """Deviation angles alpha_i (degrees) of one contour into ``alpha``; whether all finite."""
+    """Deviation angles alpha_i (degrees) of one contour into ``alpha``, their sum into
+    ``total`` and the even-odd test of the centroid (cx, cy) into ``inside``; whether all
+    gradients are finite."""
     cdef Py_ssize_t i
-    cdef double gx, gy, mx, my, dot, norm, cos
+    cdef double x, y, xp = p[2 * n - 2], yp = p[2 * n - 1], sum_alpha = 0.0
+    cdef int hits = 0
     cdef bint finite = True
     for i in range(n):
-        gx = g[2 * i]
-        gy = g[2 * i + 1]
-        mx = cx - p[2 * i]
-        my = cy - p[2 * i + 1]
-        dot = fabs(gx * mx + gy * my)
-        norm = hypot(gx, gy) * hypot(mx, my)
-        cos = dot / norm if norm > 0 else 0.0
-        cos = cos if cos < 1.0 else 1.0
-        finite = finite & (isfinite(gx) & isfinite(gy))
-        alpha[i] = acos(cos) * DEGREES
+        alpha[i] = _alpha(g[2 * i], g[2 * i + 1], cx - p[2 * i], cy - p[2 * i + 1])
+    for i in range(n):
+        x = p[2 * i]
+        y = p[2 * i + 1]
+        sum_alpha = sum_alpha + alpha[i]
+        finite = finite & (isfinite(g[2 * i]) & isfinite(g[2 * i + 1]))
+        hits = hits ^ _crosses(xp, yp, x, y, cx, cy)  # the edge into point i
+        xp = x
+        yp = y
+    total[0] = sum_alpha
+    inside[0] = hits != 0
     return finite
 
 
@@ -225,44 +141,54 @@ cdef int _compare(const void* a, const void* b) noexcept nogil:
     return (x > y) - (x < y)
 
 
+cdef inline Py_ssize_t _partition(
+    double* a, Py_ssize_t lo, Py_ssize_t hi, double pivot, bint or_equal
+) noexcept nogil:
+    """Move the values of a[lo..hi-1] below ``pivot`` (``or_equal``: not above it) to the
+    front, keeping the order of neither part; returns where the rest starts. Branchless: each
+    value is swapped with the first of the rest, which then grows only if the value belongs in
+    front (a branch on the value would be mispredicted about half the time)."""
+    cdef Py_ssize_t i, front = lo
+    cdef double x
+    for i in range(lo, hi):
+        x = a[i]
+        a[i] = a[front]
+        a[front] = x
+        front = front + ((x <= pivot) if or_equal else (x < pivot))
+    return front
+
+
 cdef double _median(double* a, Py_ssize_t n) noexcept nogil:
-    """Median of a[0..n-1] (reorders a): the mean of the two middle values for even n."""
-    cdef Py_ssize_t k = (n - 1) // 2, lo = 0, hi = n - 1, i, j
-    cdef double pivot, x, y, z, upper
+    """Median of a[0..n-1] (reorders a): the mean of the two middle values for even n.
+
+    Quickselect of rank k = (n - 1) // 2 around the median of three: each round splits the
+    range a[lo..hi-1] into the values below the pivot, those equal to it (never empty, so every
+    round shrinks the range, and runs of equal angles end it at once) and those above, and goes
+    on in the part holding rank k. The remaining range is sorted if the pivots keep failing.
+    """
+    cdef Py_ssize_t k = (n - 1) // 2, lo = 0, hi = n, below, not_above, i
+    cdef double x, y, z, pivot, upper
     cdef int rounds = 0
-    while hi > lo:
+    while hi - lo > 1:
         if rounds == MAX_ROUNDS:
-            qsort(a + lo, hi - lo + 1, sizeof(double), _compare)
+            qsort(a + lo, hi - lo, sizeof(double), _compare)
             break
         rounds = rounds + 1
-        # Hoare partition around the median of three
         x = a[lo]
         y = a[lo + (hi - lo) // 2]
-        z = a[hi]
+        z = a[hi - 1]
         pivot = y if (x <= y) == (y <= z) else (x if (y <= x) == (x <= z) else z)
-        i = lo
-        j = hi
-        while i <= j:
-            while a[i] < pivot:
-                i = i + 1
-            while a[j] > pivot:
-                j = j - 1
-            if i <= j:
-                x = a[i]
-                a[i] = a[j]
-                a[j] = x
-                i = i + 1
-                j = j - 1
-        # now a[lo..j] <= pivot <= a[i..hi], and a[j+1..i-1] == pivot
-        if k <= j:
-            hi = j
-        elif k >= i:
-            lo = i
-        else:
-            break
-    # every value after a[k] is >= a[k]
+        below = _partition(a, lo, hi, pivot, False)
+        if k < below:
+            hi = below
+            continue
+        not_above = _partition(a, below, hi, pivot, True)
+        if k < not_above:
+            break  # a[k] == pivot
+        lo = not_above
+    # a[0..k-1] <= a[k] <= a[k+1..n-1]
     if n % 2 == 1:
-        return 0.5 * (a[k] + a[k])
+        return a[k]
     upper = a[k + 1]
     for i in range(k + 2, n):
         upper = a[i] if a[i] < upper else upper
@@ -312,9 +238,10 @@ def shape_angles(
         If the offsets do not split the points into non-empty contours, or a point or gradient
         is not finite.
     """
-    cdef Py_ssize_t n_points = points.shape[0], n_contours = offsets.shape[0] - 1, k, s, n, i
+    cdef Py_ssize_t n_points = points.shape[0], n_contours = offsets.shape[0] - 1, k, s, n
     cdef int bad = 0
     cdef double total
+    cdef bint is_inside
     if points.shape[1] != 2 or gradients.shape[0] != n_points or gradients.shape[1] != 2 \
             or scratch.shape[0] != n_points:
         raise ValueError("points and gradients must both be (N, 2)")
@@ -332,15 +259,12 @@ def shape_angles(
             bad += 1
             continue
         if not _angles(&points[s, 0], &gradients[s, 0], n, centroid[k, 0], centroid[k, 1],
-                       &scratch[s]):
+                       &scratch[s], &total, &is_inside):
             bad += 1
             continue
-        inside[k] = _inside(&points[s, 0], n, centroid[k, 0], centroid[k, 1])
-        total = 0.0
-        for i in range(s, s + n):
-            total = total + scratch[i]
+        inside[k] = is_inside
         d_alpha_mean[k] = total / n
-        d_alpha_median[k] = _median(&scratch[offsets[k]], n)
+        d_alpha_median[k] = _median(&scratch[s], n)
     if bad:
         raise ValueError("points and gradients must be finite")
 
