@@ -413,6 +413,29 @@ class MeasuredContours:
     rho: np.ndarray
 
 
+def as_contour_set(points: object, offsets: object) -> tuple[np.ndarray, np.ndarray]:
+    """Concatenated contours as the kernels take them: (N, 2) float64 points, int64 offsets.
+
+    Raises
+    ------
+    ValueError
+        If ``points`` is not (N, 2) or ``offsets`` do not rise from 0 to N.
+    """
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    off = np.ascontiguousarray(offsets, dtype=np.int64)
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise ValueError(f"points must be an (N, 2) array of (x, y), got shape {pts.shape}")
+    if (
+        off.ndim != 1
+        or len(off) < 1
+        or off[0] != 0
+        or off[-1] != len(pts)
+        or np.any(off[1:] < off[:-1])
+    ):
+        raise ValueError("offsets must rise from 0 to len(points)")
+    return pts, off
+
+
 def measure_contours(
     points: np.ndarray,
     offsets: np.ndarray,
@@ -449,13 +472,8 @@ def measure_contours(
     ValueError
         If ``points`` is not (N, 2) or ``offsets`` do not rise from 0 to N.
     """
-    pts = np.ascontiguousarray(points, dtype=np.float64)
-    off = np.ascontiguousarray(offsets, dtype=np.int64)
+    pts, off = as_contour_set(points, offsets)
     k = len(off) - 1
-    if pts.ndim != 2 or pts.shape[1] != 2:
-        raise ValueError(f"points must be an (N, 2) array of (x, y), got shape {pts.shape}")
-    if off.ndim != 1 or k < 0 or off[0] != 0 or off[-1] != len(pts) or np.any(off[1:] < off[:-1]):
-        raise ValueError("offsets must rise from 0 to len(points)")
     want = np.ones(k, np.uint8) if series is None else np.ascontiguousarray(series, np.uint8)
     if centroids is None:
         centres, given = np.zeros((k, 2)), False

@@ -49,6 +49,7 @@ import numpy as np
 from labauto.vision.descriptors import (
     ShapeDescriptors,
     as_contour,
+    as_contour_set,
     measure_contours,
     raise_for_status,
     shape_descriptors,
@@ -433,13 +434,8 @@ def classify_shapes(
         ValueError (fewer than 3 points, fewer than 2 distinct ones, a non-finite point or
         ``d_alpha``).
     """
-    pts = np.ascontiguousarray(points, dtype=np.float64)
-    off = np.ascontiguousarray(offsets, dtype=np.int64)
+    pts, off = as_contour_set(points, offsets)
     k = len(off) - 1
-    if pts.ndim != 2 or pts.shape[1] != 2:
-        raise ValueError(f"points must be an (N, 2) array of (x, y), got shape {pts.shape}")
-    if off.ndim != 1 or k < 0 or off[0] != 0 or off[-1] != len(pts) or np.any(off[1:] < off[:-1]):
-        raise ValueError("offsets must rise from 0 to len(points)")
     d_alpha = np.asarray(d_alpha, dtype=np.float64).reshape(k)
     inside = np.asarray(centroid_inside, dtype=bool).reshape(k)
     if centroids is not None:
