@@ -13,6 +13,10 @@ Between parallel loops OpenMP's idle threads would by default spin for milliseco
 core from OpenCV's own threads (Canny ran 1.7x slower right after the gradient kernel, and a
 plain OpenCV pipeline run after ``detect`` 1.4x slower). So unless ``OMP_WAIT_POLICY`` is set,
 labauto sets it to ``PASSIVE`` (idle threads sleep) before the first kernel loads OpenMP.
+
+CPU: on x86-64 the kernels are compiled for the CPU of the machine that built them (setup.py). A
+build copied to a CPU without the vector extensions it uses would die on an illegal instruction,
+so importing this package first checks them (:func:`check_cpu`) and names what is missing.
 """
 
 from __future__ import annotations
@@ -20,6 +24,48 @@ from __future__ import annotations
 import os
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # read once, when OpenMP is loaded
+
+
+def cpu_flags(cpuinfo: str = "/proc/cpuinfo") -> set[str] | None:
+    """The CPU's feature flags from ``cpuinfo`` (Linux), or None where it cannot be read."""
+    try:
+        with open(cpuinfo, encoding="ascii", errors="replace") as lines:
+            for line in lines:
+                if line.startswith("flags"):
+                    return set(line.partition(":")[2].split())
+    except OSError:
+        pass
+    return None
+
+
+def check_cpu(required: tuple[str, ...], flags: set[str] | None, march: str) -> None:
+    """Raise ImportError if the CPU (its ``flags``) lacks a vector extension the kernels use.
+
+    Parameters
+    ----------
+    required : tuple of str
+        Extensions the build target uses, as /proc/cpuinfo names them (``kernels/_build.py``).
+    flags : set of str or None
+        The CPU's flags (:func:`cpu_flags`); None (unknown) passes.
+    march : str
+        The build's ``-march`` target, for the message.
+    """
+    missing = [name for name in required if flags is not None and name not in flags]
+    if missing:
+        raise ImportError(
+            f"labauto's compiled kernels were built for -march={march} and use "
+            f"{', '.join(missing)}, which this CPU lacks; reinstall labauto on this machine "
+            "(pip install --force-reinstall --no-deps --no-binary labauto ...), or build it "
+            "for any x86-64 CPU with LABAUTO_MARCH=x86-64-v2"
+        )
+
+
+try:
+    from labauto.vision.kernels._build import CPU_FEATURES, MARCH
+except ImportError:  # kernels built by hand (cythonize), not by setup.py
+    pass
+else:
+    check_cpu(CPU_FEATURES, cpu_flags(), MARCH)
 
 
 def _default_threads() -> int:
