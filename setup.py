@@ -11,6 +11,12 @@ SSE4.2 every x86-64 CPU since about 2009 has. ``LABAUTO_MARCH`` sets another tar
 extensions the target uses are written to ``kernels/_build.py``; on import, labauto checks that the
 CPU has them and otherwise stops with an error that names them (instead of crashing on an illegal
 instruction), see :func:`labauto.vision.kernels.check_cpu`.
+
+Floating point: ``-ffp-contract=off`` keeps the compiler from fusing a multiply and an add into
+one FMA instruction where the target has it. Fused and unfused results differ in the last bit, and
+the compiler fuses differently where the same code is inlined in two places, so without it the same
+ellipse fit could come out 1 ulp apart by path or by target; with it, every target gives the same
+numbers and the kernels match their plain-numpy references exactly where the tests say so.
 """
 
 import os
@@ -73,7 +79,12 @@ extensions = [
     Extension(
         f"labauto.vision.kernels.{pyx.stem}",
         [str(pyx)],
-        extra_compile_args=["-O3", *([f"-march={MARCH}"] if MARCH else []), *OPENMP],
+        extra_compile_args=[
+            "-O3",
+            "-ffp-contract=off",
+            *([f"-march={MARCH}"] if MARCH else []),
+            *OPENMP,
+        ],
         extra_link_args=OPENMP,
     )
     for pyx in sorted(KERNELS.glob("*.pyx"))
