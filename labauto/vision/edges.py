@@ -32,6 +32,7 @@ import threading
 import cv2
 import numpy as np
 
+from labauto.vision import kernels
 from labauto.vision.kernels import edges as _kernel
 
 
@@ -149,7 +150,12 @@ def link_edges(
     """
     edges = _edge_map(edges)
     return _kernel.link(
-        edges, _work_map(edges.shape), _REMOVABLE_U8, _THIN_PASSES, *_limits(min_length, max_length)
+        edges,
+        _work_map(edges.shape),
+        _REMOVABLE_U8,
+        _THIN_PASSES,
+        *_limits(min_length, max_length),
+        workspace=_workspace(),
     )
 
 
@@ -163,7 +169,8 @@ def edge_contours(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Ordered chains of an edge map with their gradients and (sub-pixel) positions.
 
-    :func:`link_edges`, :func:`gradient_at` and :func:`refine_subpixel` in one kernel call.
+    :func:`link_edges`, :func:`gradient_at` and :func:`refine_subpixel` in one kernel call, on
+    :func:`labauto.vision.kernels.threads` threads (the result does not depend on their number).
 
     Parameters
     ----------
@@ -198,6 +205,8 @@ def edge_contours(
         gx,
         gy,
         bool(subpixel),
+        _workspace(),
+        kernels.threads(),
     )
 
 
@@ -316,6 +325,14 @@ def _limits(min_length: int, max_length: int | None) -> tuple[int, int]:
 
 
 _WORK = threading.local()
+
+
+def _workspace() -> _kernel.Workspace:
+    """This thread's buffers for the linker (kept between calls: see ``kernels.edges``)."""
+    workspace = getattr(_WORK, "workspace", None)
+    if workspace is None:
+        workspace = _WORK.workspace = _kernel.Workspace()
+    return workspace
 
 
 def _work_map(shape: tuple[int, ...]) -> np.ndarray:

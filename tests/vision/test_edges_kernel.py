@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from labauto.synthetic.shapes import make_scene
+from labauto.vision import kernels
 from labauto.vision.contours import ends_adjacent
 from labauto.vision.edges import (
     _NEIGHBOURS,
@@ -269,6 +270,59 @@ def test_edge_contours_is_link_refine_and_gradient(seed: int, subpixel: bool) ->
     np.testing.assert_array_equal(grads, gradient_at(gx, gy, pix))
     np.testing.assert_array_equal(closed, ends_adjacent(pix.astype(np.float64), offsets))
     assert closed.dtype == bool and points.dtype == np.float64
+
+
+@pytest.fixture
+def restore_threads():
+    before = kernels.threads()
+    yield
+    kernels.set_threads(before)
+
+
+def _contours_on_threads(
+    edges: np.ndarray, gx: np.ndarray, gy: np.ndarray, min_length: int, subpixel: bool
+) -> list[tuple[np.ndarray, ...]]:
+    results = []
+    for threads in (1, 2, 3):  # 3: more threads than this machine's cores
+        kernels.set_threads(threads)
+        results.append(edge_contours(edges, gx, gy, min_length, None, subpixel))
+    return results
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_edge_contours_same_on_any_number_of_threads(seed: int, restore_threads) -> None:
+    """Maps large enough for the threaded path (image split in two bands, thinned apart, then
+    the seam; chains sampled by several threads): identical output on 1, 2 and 3 threads, and
+    the same as the separate linking, lookup and refinement."""
+    rng = np.random.default_rng(600 + seed)
+    h, w = int(rng.integers(256, 400)), int(rng.integers(256, 500))
+    edges = _random_map(rng, h, w)
+    for _ in range(int(rng.integers(20, 60))):  # longer strokes crossing the band split
+        a, b = rng.integers(0, (w, h), size=(2, 2))
+        cv2.line(edges, tuple(int(v) for v in a), tuple(int(v) for v in b), 255, 1)
+    gx = rng.integers(-600, 601, (h, w)).astype(np.int16)
+    gy = rng.integers(-600, 601, (h, w)).astype(np.int16)
+    subpixel = bool(seed % 2)
+    serial, *threaded = _contours_on_threads(edges, gx, gy, 3, subpixel)
+    for result in threaded:
+        for a, b in zip(serial, result, strict=True):
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+    pix, pix_offsets = link_edges(edges, 3)
+    np.testing.assert_array_equal(serial[1], pix_offsets)
+    expected = refine_subpixel(pix, gx, gy) if subpixel else pix.astype(np.float64)
+    np.testing.assert_array_equal(serial[0], expected)
+    np.testing.assert_array_equal(serial[2], gradient_at(gx, gy, pix))
+    assert not _work_map(edges.shape).any()
+
+
+def test_edge_contours_on_a_scene_same_on_any_number_of_threads(restore_threads) -> None:
+    gx, gy = color_gradient(make_scene(np.random.default_rng(1))[0], 0.7)
+    edges = canny_edges(gx, gy, 40.0, 100.0)
+    serial, *threaded = _contours_on_threads(edges, gx, gy, 20, True)
+    for result in threaded:
+        for a, b in zip(serial, result, strict=True):
+            np.testing.assert_array_equal(a, b)
 
 
 def test_bad_input_raises_value_error() -> None:

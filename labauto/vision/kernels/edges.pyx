@@ -1,30 +1,52 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+# distutils: extra_compile_args = -fno-math-errno -fno-trapping-math
 """Edge linking kernel (section 3.1): thinning, outer border tracing, ordered chains, sub-pixel.
 
 See :mod:`labauto.vision.edges` for the definitions. One call of :func:`link` goes from a Canny
 edge map to the finished chains:
 
-1. the edge pixels are collected in raster order into a zeroed padded work map (one-pixel zero
-   border, so a 3x3 neighbourhood never needs a bounds check): 64 pixels at a time, a bit mask
-   of the nonzero ones from four SSE2 compares, then its set bits (a per-byte loop spends most
-   of its time on mispredicted branches: an edge map is ~1 % edges, in short runs);
-2. they are thinned in checkerboard classes (``thin_edges``): the same passes, in the same
-   order, as deciding every pixel of a class at once. After the first pass only pixels next
-   to a removal (marked DIRTY) are decided again: the others would be kept as before;
-3. every 8-connected component, from its first pixel in raster order, gets the outer border
-   trace of Suzuki and Abe, step for step as ``cv2.findContours`` (``RETR_CCOMP``,
-   ``CHAIN_APPROX_NONE``) follows it; the trace becomes a chain (``traces_to_chains``: rotated
-   to its first turnaround if traced out and back, each pixel at its first visit); components
-   are emitted in reverse raster order of their first pixels, as ``findContours`` lists them;
+1. collecting (``_collect``): a row's edge pixels are found 64 at a time (a bit mask of the
+   nonzero bytes, then its set bits: an edge map is ~1 % edges, in short runs, and a per-byte
+   loop spends its time on mispredicted branches), set in a zeroed padded work map (one-pixel
+   zero border, so a 3x3 neighbourhood needs no bounds check) and listed row by row;
+2. thinning (``_thin``), as ``thin_edges``: pixels decided in checkerboard classes, class by
+   class and pass by pass. A pixel's decision reads only its row and the two next to it, so
+   one sweep down the rows decides a row's two classes of pass ``it`` together ("row step"
+   ``K = 2 it + row parity``) once the rows above and below are at step ``K - 1`` and not yet
+   at ``K + 1``: row ``y`` takes step ``K`` in round ``y + 2 K``. Every pixel is then decided on
+   the same neighbourhood as in the class-by-class order, so the result is the same, with the
+   work confined to a few rows. A decision looks the 3x3 neighbourhood up as a 9-bit index
+   (three 4-byte loads, no loop over the neighbours). In pass ``it > 0`` only pixels next to a
+   removal (marked DIRTY) are decided again: the others would be kept as before;
+3. every 8-connected component is marked from where it is met (flood fill, which also finds
+   its first pixel in raster order), then gets the outer border trace of Suzuki and Abe, step
+   for step as ``cv2.findContours`` (``RETR_CCOMP``, ``CHAIN_APPROX_NONE``) follows it, and the
+   trace becomes a chain (``traces_to_chains``: rotated to its first turnaround if traced out
+   and back, each pixel at its first visit). Chains are listed in reverse raster order of the
+   components' first pixels, as ``findContours`` lists them;
 4. optionally the gradient at every point and the Devernay sub-pixel position (float32
-   arithmetic, as the numpy formulation of ``refine_subpixel``), in chain order, with the
-   gradient rows of the point 16 ahead prefetched (a chain wanders over the image: without
-   the prefetch the loop mostly waits on memory).
+   arithmetic, as the numpy formulation of ``refine_subpixel``): a scalar loop gathers the
+   gradients a point needs, with those of the point AHEAD further prefetched (a chain wanders
+   over the image: without the prefetch the loop mostly waits on memory), then a vectorised
+   loop does the arithmetic.
 
-The work map is left all zero again (only the touched pixels are cleared), so the caller can
-keep one per image size instead of paying for a fresh image-sized allocation on every call.
+With a gradient and more than one thread, one parallel region without barriers: the image is
+split into a top and a bottom band. The linking thread collects and thins the top band's own
+row steps while another thread does the bottom band's (the two touch disjoint rows and do not
+depend on each other; if no other thread has started yet, the linking thread does the bottom
+band too), then the linking thread does the few seam steps around the split and links,
+publishing each chain as it is done; the other threads sample published chains (and so does
+the linking thread once it is done). A thread woken late (this can take a few hundred
+microseconds) only takes less work. The samples go to a buffer in chain order and are copied
+into place at the end. The result does not depend on the number of threads.
+
+Buffers that depend on the number of edge pixels live in a :class:`Workspace` the caller keeps
+between calls (blocks that large are handed back to the system when freed, so fresh ones cost
+page faults), and the work map is left all zero again (only the touched pixels are cleared), so
+the caller keeps one per image size too.
 """
 
+from cython.parallel cimport parallel, threadid
 from libc.math cimport sqrt
 from libc.stdlib cimport free, malloc, realloc
 from libc.string cimport memcpy
@@ -32,7 +54,10 @@ from libc.string cimport memcpy
 import numpy as np
 
 cdef enum:
-    AHEAD = 16  # _sample_points: prefetch the gradient rows of the point this far ahead
+    BLOCK = 64  # sampling: points gathered, then computed vectorised, at a time
+    AHEAD = 16  # sampling: prefetch the gradient rows of the point this far ahead
+    MIN_THREADED_ROWS = 64  # smaller maps are done on one thread
+    MIN_THREADED_AREA = 65536
 
 
 # marks in the work map: bit 0 edge pixel, the others are bookkeeping of the linker
@@ -94,6 +119,28 @@ cdef inline void _push(Vec* v, Py_ssize_t value) noexcept nogil:
     v.size += 1
 
 
+cdef inline void _clear(Vec* v) noexcept nogil:
+    v.size = 0
+    v.failed = 0
+
+
+cdef inline int _grow(void** buffer, Py_ssize_t* cap, Py_ssize_t size, size_t item) noexcept nogil:
+    """Make ``*buffer`` (``*cap`` items of ``item`` bytes) hold at least ``size`` items, keeping
+    its contents; -1 when out of memory (the buffer is kept)."""
+    cdef Py_ssize_t grown_cap = cap[0] if cap[0] > 16 else 16
+    cdef void* grown
+    if size <= cap[0]:
+        return 0
+    while grown_cap < size:
+        grown_cap = 2 * grown_cap
+    grown = realloc(buffer[0], grown_cap * item)
+    if grown == NULL:
+        return -1
+    buffer[0] = grown
+    cap[0] = grown_cap
+    return 0
+
+
 cdef inline Py_ssize_t _row_of(Py_ssize_t p, Py_ssize_t stride, double inverse) noexcept nogil:
     """``p // stride`` for 0 <= p < 2**50 without an integer division (``inverse = 1 / stride``).
 
@@ -105,29 +152,139 @@ cdef inline Py_ssize_t _row_of(Py_ssize_t p, Py_ssize_t stride, double inverse) 
     return y
 
 
-cdef inline void _ring(Py_ssize_t stride, Py_ssize_t* ring) noexcept nogil:
-    """Ring offsets N, NE, E, SE, S, SW, W, NW (the bit order of the removable table)."""
-    ring[0] = -stride
-    ring[1] = -stride + 1
-    ring[2] = 1
-    ring[3] = stride + 1
-    ring[4] = stride
-    ring[5] = stride - 1
-    ring[6] = -1
-    ring[7] = -stride - 1
+ctypedef struct Buffers:  # see Workspace
+    Vec pixels  # padded indices of the edge pixels, row by row (of the top band)
+    Vec pixels2  # those of the bottom band (when the image is split between two threads)
+    Vec chains  # chain pixels, chain after chain (room for all pixels: never moved while shared)
+    Vec found  # (first pixel, start in chains, length) per chain, sorted by first pixel
+    Vec published  # (start in chains, length) per chain, in the order they were made
+    Vec ordered  # chain pixels in output order (sampled straight into the outputs)
+    Vec trace
+    Vec stack
+    Py_ssize_t* row_start  # pixels of padded row y: pixels[row_start[y]:row_start[y + 1]]
+    Py_ssize_t row_cap
+    Py_ssize_t* row_start2  # the same for the rows of the bottom band, in pixels2
+    Py_ssize_t row2_cap
+    unsigned long long* masks  # one row's bit masks of edge pixels
+    Py_ssize_t mask_cap
+    unsigned long long* masks2  # (for the bottom band)
+    Py_ssize_t mask2_cap
+    double* points  # threaded sampling: per chain pixel (as ``chains``) its position (x, y)
+    Py_ssize_t points_cap
+    float* gradients  # and gradient
+    Py_ssize_t gradients_cap
+
+
+cdef int _prepare(Buffers* b, Py_ssize_t h, Py_ssize_t w) noexcept nogil:
+    """Room for the per-row tables of an HxW map; empty lists. -1 when out of memory."""
+    _clear(&b.pixels)  # (after a failed call too: a buffer that failed to grow is kept)
+    _clear(&b.pixels2)
+    _clear(&b.chains)
+    _clear(&b.found)
+    _clear(&b.published)
+    _clear(&b.ordered)
+    _clear(&b.trace)
+    _clear(&b.stack)
+    if _grow(<void**>&b.row_start, &b.row_cap, h + 3, sizeof(Py_ssize_t)) < 0 \
+            or _grow(<void**>&b.row_start2, &b.row2_cap, h + 3, sizeof(Py_ssize_t)) < 0 \
+            or _grow(<void**>&b.masks, &b.mask_cap, (w + 63) // 64, sizeof(long long)) < 0 \
+            or _grow(<void**>&b.masks2, &b.mask2_cap, (w + 63) // 64, sizeof(long long)) < 0:
+        return -1
+    return 0
+
+
+cdef int _reserve_links(Buffers* b, bint samples) noexcept nogil:
+    """Room in the chain buffers for every collected pixel (and their samples); -1 when out of
+    memory."""
+    cdef Py_ssize_t n = b.pixels.size + b.pixels2.size
+    if _reserve(&b.chains, n) < 0 or _reserve(&b.published, 2 * n) < 0 \
+            or _reserve(&b.ordered, n) < 0:
+        return -1
+    if samples and (_grow(<void**>&b.points, &b.points_cap, 2 * n, sizeof(double)) < 0
+                    or _grow(<void**>&b.gradients, &b.gradients_cap, 2 * n, sizeof(float)) < 0):
+        return -1
+    return 0
+
+
+cdef class Workspace:
+    """Buffers of :func:`link` kept between calls (one per thread: a workspace is not shared).
+
+    Their size follows the number of edge pixels. Allocated afresh on every call they would
+    cost page faults: the allocator hands blocks that large back to the system when freed.
+    """
+
+    cdef Buffers b
+
+    def __cinit__(self):
+        _init(&self.b.pixels, 4096)
+        _init(&self.b.pixels2, 4096)
+        _init(&self.b.chains, 4096)
+        _init(&self.b.found, 256)
+        _init(&self.b.published, 256)
+        _init(&self.b.ordered, 4096)
+        _init(&self.b.trace, 4096)
+        _init(&self.b.stack, 1024)
+        self.b.row_start = NULL
+        self.b.row_cap = 0
+        self.b.row_start2 = NULL
+        self.b.row2_cap = 0
+        self.b.masks = NULL
+        self.b.mask_cap = 0
+        self.b.masks2 = NULL
+        self.b.mask2_cap = 0
+        self.b.points = NULL
+        self.b.points_cap = 0
+        self.b.gradients = NULL
+        self.b.gradients_cap = 0
+        if self.b.pixels.failed or self.b.pixels2.failed or self.b.chains.failed \
+                or self.b.found.failed or self.b.published.failed or self.b.ordered.failed \
+                or self.b.trace.failed or self.b.stack.failed:
+            raise MemoryError("Workspace: out of memory")
+
+    def __dealloc__(self):
+        free(self.b.pixels.data)
+        free(self.b.pixels2.data)
+        free(self.b.chains.data)
+        free(self.b.found.data)
+        free(self.b.published.data)
+        free(self.b.ordered.data)
+        free(self.b.trace.data)
+        free(self.b.stack.data)
+        free(self.b.row_start)
+        free(self.b.row_start2)
+        free(self.b.masks)
+        free(self.b.masks2)
+        free(self.b.points)
+        free(self.b.gradients)
 
 
 # ---------------------------------------------------------------------------------------------
-# collecting and thinning
+# 3x3 neighbourhoods as bit masks
 
 
 cdef extern from *:
     """
-    #include <emmintrin.h>
+    #include <string.h>
+    #if defined(__x86_64__) || defined(__i386__) || defined(_M_X64)
+    #include <immintrin.h>
+    #define LABAUTO_X86 1
+    #endif
     static inline int labauto_ctz64(unsigned long long v) { return __builtin_ctzll(v); }
 
-    /* bit k set where p[k] != 0, k < 64: four SSE2 compares of 16 bytes with zero */
+    /* bit k set where p[k] != 0, k < 64 (one AVX-512 test, or 32- or 16-byte compares, or a
+       plain loop on CPUs other than x86) */
     static inline unsigned long long labauto_nonzero64(const unsigned char* p) {
+    #if defined(__AVX512BW__)
+        const __m512i v = _mm512_loadu_si512((const void*)p);
+        return _mm512_test_epi8_mask(v, v);
+    #elif defined(__AVX2__)
+        const __m256i zero = _mm256_setzero_si256();
+        unsigned long long lo = (unsigned)_mm256_movemask_epi8(
+            _mm256_cmpeq_epi8(_mm256_loadu_si256((const __m256i*)p), zero));
+        unsigned long long hi = (unsigned)_mm256_movemask_epi8(
+            _mm256_cmpeq_epi8(_mm256_loadu_si256((const __m256i*)(p + 32)), zero));
+        return ~(lo | hi << 32);
+    #elif defined(LABAUTO_X86)
         const __m128i zero = _mm_setzero_si128();
         unsigned long long zeros = 0, bits;
         for (int k = 0; k < 4; k++) {
@@ -136,138 +293,401 @@ cdef extern from *:
             zeros |= bits << (16 * k);
         }
         return ~zeros;
+    #else  /* other CPUs: the compiler vectorises this as it can */
+        unsigned long long found = 0;
+        for (int k = 0; k < 64; k++) found |= (unsigned long long)(p[k] != 0) << k;
+        return found;
+    #endif
     }
 
     /* the same for the last n < 64 pixels of a row */
     static inline unsigned long long labauto_nonzero_tail(const unsigned char* p, Py_ssize_t n) {
+    #if defined(__AVX512BW__)
+        const __m512i v = _mm512_maskz_loadu_epi8((1ULL << n) - 1, (const void*)p);
+        return _mm512_test_epi8_mask(v, v);
+    #else
         unsigned long long found = 0;
         for (Py_ssize_t k = 0; k < n; k++) found |= (unsigned long long)(p[k] != 0) << k;
         return found;
+    #endif
     }
+
+    /* four bytes from p (any alignment), byte k in bits 8k..8k+7 */
+    static inline unsigned labauto_load4(const unsigned char* p) {
+        unsigned v;
+        memcpy(&v, p, 4);
+    #if __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+        v = __builtin_bswap32(v);
+    #endif
+        return v;
+    }
+
+    /* hand-over between the linking thread and the sampling threads: relaxed/acquire/release
+       atomics, a pause in spin loops */
+    static inline Py_ssize_t labauto_load_acquire(const Py_ssize_t* p) {
+        return __atomic_load_n(p, __ATOMIC_ACQUIRE);
+    }
+    static inline Py_ssize_t labauto_load_relaxed(const Py_ssize_t* p) {
+        return __atomic_load_n(p, __ATOMIC_RELAXED);
+    }
+    static inline void labauto_store_release(Py_ssize_t* p, Py_ssize_t v) {
+        __atomic_store_n(p, v, __ATOMIC_RELEASE);
+    }
+    static inline int labauto_claim(Py_ssize_t* p, Py_ssize_t expected) {
+        return __atomic_compare_exchange_n(p, &expected, expected + 1, 0, __ATOMIC_RELAXED,
+                                           __ATOMIC_RELAXED);
+    }
+    static inline void labauto_add_release(Py_ssize_t* p, Py_ssize_t v) {
+        __atomic_fetch_add(p, v, __ATOMIC_RELEASE);
+    }
+    #if defined(LABAUTO_X86)
+    static inline void labauto_pause(void) { _mm_pause(); }
+    #else
+    static inline void labauto_pause(void) {}
+    #endif
+
+    /* a prefetch the optimiser keeps: a function whose only effect is __builtin_prefetch is
+       found side-effect free by GCC's interprocedural analysis and its calls are dropped */
+    static inline void labauto_prefetch(const void* p) {
+    #if defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
+        __asm__ __volatile__("prefetcht0 %0" : : "m"(*(const char*)p));
+    #else
+        __builtin_prefetch(p);
+    #endif
+    }
+    #if defined(_WIN32)
+    static inline void labauto_yield(void) {}
+    #else
+    #include <sched.h>
+    static inline void labauto_yield(void) { sched_yield(); }
+    #endif
+
+    /* the 9-bit neighbourhood index bit of the ring N, NE, E, SE, S, SW, W, NW (the removable
+       table's code) and of the tracer's directions E, NE, N, NW, W, SW, S, SE */
+    static const int labauto_ring_bits[8] = {3, 6, 7, 8, 5, 2, 1, 0};
+    static const int labauto_direction_bits[8] = {7, 6, 3, 0, 1, 2, 5, 8};
     """
     unsigned long long _nonzero64 "labauto_nonzero64"(const unsigned char* p) noexcept nogil
     unsigned long long _nonzero_tail "labauto_nonzero_tail"(
         const unsigned char* p, Py_ssize_t n) noexcept nogil
     int _ctz "labauto_ctz64"(unsigned long long v) noexcept nogil
-    void _prefetch "__builtin_prefetch"(const void* address) noexcept nogil
+    unsigned _load4 "labauto_load4"(const unsigned char* p) noexcept nogil
+    void _prefetch "labauto_prefetch"(const void* address) noexcept nogil
+    const int* RING_BITS "labauto_ring_bits"
+    Py_ssize_t _load_acquire "labauto_load_acquire"(const Py_ssize_t* p) noexcept nogil
+    Py_ssize_t _load_relaxed "labauto_load_relaxed"(const Py_ssize_t* p) noexcept nogil
+    void _store_release "labauto_store_release"(Py_ssize_t* p, Py_ssize_t v) noexcept nogil
+    bint _claim "labauto_claim"(Py_ssize_t* p, Py_ssize_t expected) noexcept nogil
+    void _add_release "labauto_add_release"(Py_ssize_t* p, Py_ssize_t v) noexcept nogil
+    void _pause "labauto_pause"() noexcept nogil
+    void _yield "labauto_yield"() noexcept nogil
+    const int* DIRECTION_BITS "labauto_direction_bits"
+
+
+# A 3x3 neighbourhood as a 9-bit index: bit 3 c + r is column x - 1 + c, row y - 1 + r (bit 4
+# is the centre). Three 4-byte loads give the three rows, the bits are gathered with shifts; a
+# table by this index replaces the loop over the eight neighbours.
+
+cdef inline unsigned _edges9(const unsigned char* pad, Py_ssize_t p, Py_ssize_t stride) \
+        noexcept nogil:
+    """9-bit index of the edge pixels (bit 0 of the map) around padded index ``p``.
+
+    Reads only bytes of the padded map: ``p - stride - 1 .. p - stride + 2``, ``p - 1 .. p + 2``
+    and ``p + stride - 2 .. p + stride + 1``. (Not for maps just written nearby: a 4-byte load
+    over a byte stored a moment ago waits for the store.)
+    """
+    cdef unsigned t = (_load4(pad + p - stride - 1) & 0x010101u) \
+        | ((_load4(pad + p - 1) & 0x010101u) << 1) \
+        | ((_load4(pad + p + stride - 2) & 0x01010100u) >> 6)
+    return (t & 7u) | ((t >> 5) & 0x38u) | ((t >> 10) & 0x1C0u)
+
+
+cdef void _removable9(const unsigned char* removable, unsigned char* removable9) noexcept nogil:
+    """The thinning table by 9-bit index (``removable`` is indexed by the ring code: bit k for
+    N, NE, E, SE, S, SW, W, NW)."""
+    cdef int index, k, code
+    for index in range(512):
+        code = 0
+        for k in range(8):
+            code = code | (((index >> RING_BITS[k]) & 1) << k)
+        removable9[index] = removable[code]
+
+
+# ---------------------------------------------------------------------------------------------
+# gradient and sub-pixel refinement of a pixel
+
+
+# Gradient and Devernay position of pixels, BLOCK at a time: ``_gather`` takes a pixel's
+# gradients, ``_flush`` computes the gathered ones into rows ``done..`` of the outputs.
+ctypedef struct Sampler:
+    const short* gx  # H x W
+    const short* gy
+    Py_ssize_t h
+    Py_ssize_t w
+    bint subpixel
+    double* points  # N x 2: (x, y), refined
+    float* gradients  # N x 2: (gx, gy)
+    Py_ssize_t done  # outputs written
+    int count  # gathered, not yet computed
+    short ax[BLOCK]  # gradient at the pixel
+    short ay[BLOCK]
+    short bx[BLOCK]  # at its neighbour before along the chosen axis (x - 1 or y - 1)
+    short by[BLOCK]
+    short cx[BLOCK]  # and after
+    short cy[BLOCK]
+    int px[BLOCK]
+    int py[BLOCK]
+    unsigned char along_x[BLOCK]
+
+
+cdef inline float _magnitude(short a, short b) noexcept nogil:
+    """float32 hypot of two int16 values (as numpy's: exact square sum, one rounding)."""
+    cdef double fa = a, fb = b
+    return <float>sqrt(fa * fa + fb * fb)
+
+
+cdef void _flush(Sampler* s) noexcept nogil:
+    """Compute the gathered pixels (see ``_gather``) into the outputs.
+
+    Along x or y (whichever is closer to the gradient; x on ties), the vertex of the parabola
+    through the magnitudes at the pixel and its two neighbours, if the pixel is a strict
+    maximum there; at most 0.5 px. Float32 steps as ``refine_subpixel``. Written without
+    branches, so that it vectorises.
+    """
+    cdef int i, n = s.count
+    cdef float m0, mm, mp, denom, offset, dx, dy
+    cdef double* points = s.points + 2 * s.done
+    cdef float* gradients = s.gradients + 2 * s.done
+    for i in range(n):
+        gradients[2 * i] = s.ax[i]
+        gradients[2 * i + 1] = s.ay[i]
+    if not s.subpixel:
+        for i in range(n):
+            points[2 * i] = s.px[i]
+            points[2 * i + 1] = s.py[i]
+    else:
+        for i in range(n):
+            m0 = _magnitude(s.ax[i], s.ay[i])
+            mm = _magnitude(s.bx[i], s.by[i])
+            mp = _magnitude(s.cx[i], s.cy[i])
+            denom = mm - <float>2.0 * m0
+            denom = denom + mp
+            offset = <float>0.5 * (mm - mp)
+            offset = offset / denom
+            offset = <float>0.5 if offset > <float>0.5 else offset
+            offset = <float>-0.5 if offset < <float>-0.5 else offset
+            offset = offset if denom < 0 else <float>0.0
+            dx = offset if s.along_x[i] else <float>0.0
+            dy = <float>0.0 if s.along_x[i] else offset
+            points[2 * i] = <double>s.px[i] + <double>dx
+            points[2 * i + 1] = <double>s.py[i] + <double>dy
+    s.done += n
+    s.count = 0
+
+
+cdef inline void _gather(Sampler* s, Py_ssize_t x, Py_ssize_t y) noexcept nogil:
+    """Take the gradients pixel (x, y) needs; compute the block when it is full.
+
+    The neighbours are those along x or y, whichever is closer to the gradient. A pixel without
+    both of them inside the image uses its own gradient for them: the parabola is then flat
+    (its denominator exactly 0) and the pixel stays where it is, as required.
+    """
+    cdef Py_ssize_t at = y * s.w + x, off
+    cdef short a = s.gx[at], b = s.gy[at]
+    cdef bint horizontal = (a if a >= 0 else -a) >= (b if b >= 0 else -b)
+    cdef int i = s.count
+    if horizontal:
+        off = 1 if 1 <= x < s.w - 1 else 0
+    else:
+        off = s.w if 1 <= y < s.h - 1 else 0
+    s.ax[i] = a
+    s.ay[i] = b
+    s.bx[i] = s.gx[at - off]
+    s.by[i] = s.gy[at - off]
+    s.cx[i] = s.gx[at + off]
+    s.cy[i] = s.gy[at + off]
+    s.px[i] = <int>x
+    s.py[i] = <int>y
+    s.along_x[i] = horizontal
+    s.count = i + 1
+    if s.count == BLOCK:
+        _flush(s)
+
+
+cdef inline void _prefetch_pixel(const Sampler* s, Py_ssize_t x, Py_ssize_t y) noexcept nogil:
+    """Prefetch the gradient at (x, y) and above and below it."""
+    cdef Py_ssize_t at = y * s.w + x
+    _prefetch(s.gx + at)
+    _prefetch(s.gy + at)
+    if 0 < y < s.h - 1:
+        _prefetch(s.gx + at - s.w)
+        _prefetch(s.gy + at - s.w)
+        _prefetch(s.gx + at + s.w)
+        _prefetch(s.gy + at + s.w)
+
+
+cdef inline void _prefetch_point(
+    const Sampler* s, Py_ssize_t p, Py_ssize_t stride, Py_ssize_t shift, double inverse
+) noexcept nogil:
+    """``_prefetch_pixel`` of a point given as a linear index (rows ``stride`` apart,
+    ``inverse = 1 / stride``, a border of ``shift``)."""
+    cdef Py_ssize_t y = _row_of(p, stride, inverse)
+    _prefetch_pixel(s, p - y * stride - shift, y - shift)
+
+
+cdef void _sample_run(
+    Sampler* s, const Py_ssize_t* points, Py_ssize_t n, Py_ssize_t stride, Py_ssize_t shift
+) noexcept nogil:
+    """Sample ``n`` points given as linear indices (rows ``stride`` apart, a border of
+    ``shift``) into rows ``s.done..`` of the sampler's outputs, prefetching AHEAD points early."""
+    cdef Py_ssize_t i, p, y
+    cdef double inverse = 1.0 / stride
+    for i in range(n):
+        if i + AHEAD < n:
+            _prefetch_point(s, points[i + AHEAD], stride, shift, inverse)
+        p = points[i]
+        y = _row_of(p, stride, inverse)
+        _gather(s, p - y * stride - shift, y - shift)
+    _flush(s)
+
+
+# ---------------------------------------------------------------------------------------------
+# collecting and thinning
+
+
+cdef inline Py_ssize_t _collect_row(
+    const unsigned char* row, Py_ssize_t w, unsigned char* pad, Py_ssize_t at, Py_ssize_t* out,
+    unsigned long long* masks,
+) noexcept nogil:
+    """Set EDGE in ``pad`` at ``at + x`` for every nonzero ``row[x]`` (x < w) and list those
+    padded indices in ``out`` (room for ``w``): first the even ones, then the odd ones (the
+    row's two checkerboard classes), each ascending. Returns how many.
+
+    64 pixels at a time: a bit mask of the nonzero ones (kept in ``masks``, room for
+    ``(w + 63) // 64``), then its set bits of one parity, lowest first. Most blocks of an edge
+    map are empty and cost one test.
+    """
+    cdef Py_ssize_t x, b, n = 0, q, blocks = (w + 63) // 64
+    cdef unsigned long long found, even
+    cdef int parity
+    for b in range(blocks):
+        x = 64 * b
+        masks[b] = _nonzero64(row + x) if x + 64 <= w else _nonzero_tail(row + x, w - x)
+    even = 0x5555555555555555 if at % 2 == 0 else 0xAAAAAAAAAAAAAAAA  # at + x + k even
+    for parity in range(2):
+        for b in range(blocks):
+            found = masks[b] & (even if parity == 0 else ~even)
+            while found != 0:
+                q = at + 64 * b + _ctz(found)
+                pad[q] = EDGE
+                out[n] = q
+                n += 1
+                found &= found - 1
+    return n
+
+
+cdef inline void _thin_row(
+    unsigned char* pad, Py_ssize_t stride, const Py_ssize_t* pixels, Py_ssize_t begin,
+    Py_ssize_t end, const unsigned char* removable9, const Py_ssize_t* offsets9,
+    bint first_pass,
+) noexcept nogil:
+    """One row step of the thinning: decide the row's pixels ``pixels[begin:end]`` (its even
+    class, then its odd class, as ``_collect_row`` lists them).
+
+    Pixels of one class are never neighbours, so deciding them one after the other in place is
+    deciding them at once. Removed pixels (0) are skipped; after the first pass so are pixels
+    kept since no neighbour was removed (EDGE without DIRTY): the table would answer the same.
+    A removal marks the neighbours DIRTY; a kept pixel is set back to plain EDGE (only if it was
+    DIRTY: a store there would hold up the next pixel's loads).
+    """
+    cdef Py_ssize_t i, p, q
+    cdef unsigned around
+    cdef unsigned char v
+    for i in range(begin, end):
+        p = pixels[i]
+        v = pad[p]
+        if v == 0 or (v == EDGE and not first_pass):
+            continue
+        around = _edges9(pad, p, stride)
+        if not removable9[around]:
+            if v != EDGE:
+                pad[p] = EDGE
+            continue
+        pad[p] = 0
+        around &= ~16u  # the neighbours
+        while around != 0:
+            q = p + offsets9[_ctz(around)]
+            around &= around - 1
+            pad[q] = pad[q] | DIRTY
 
 
 cdef int _collect(
-    const unsigned char* edges, Py_ssize_t h, Py_ssize_t w, Py_ssize_t step, unsigned char* pad,
-    Py_ssize_t stride, Vec* pixels,
+    const unsigned char* edges, Py_ssize_t r0, Py_ssize_t r1, Py_ssize_t w, Py_ssize_t step,
+    unsigned char* pad, Py_ssize_t stride, Vec* pixels, Py_ssize_t* row_start,
+    unsigned long long* masks,
 ) noexcept nogil:
-    """Set EDGE at every nonzero pixel of ``edges`` (HxW, rows ``step`` bytes apart) in the
-    padded map; list them in raster order. ``edges`` may be the interior of ``pad`` itself
-    (``thin``).
-
-    64 pixels at a time: a bit mask of the nonzero ones (SSE2 compares), then its set bits,
-    lowest first. Most blocks of an edge map are empty and cost one test. Returns -1 when out
-    of memory.
+    """Set EDGE at every nonzero pixel of image rows ``r0..r1 - 1`` of ``edges`` (rows ``step``
+    bytes apart; padded rows ``r0 + 1..r1``) in the padded map and list them in ``pixels``, row
+    by row (in a row: even padded indices, then odd); padded row ``y`` is
+    ``pixels[row_start[y]:row_start[y + 1]]``. Returns -1 when out of memory.
     """
-    cdef Py_ssize_t x, y, at
-    cdef const unsigned char* row
-    cdef unsigned long long found
-    for y in range(h):
-        if pixels.cap - pixels.size < w and _reserve(pixels, pixels.size + w) < 0:
+    cdef Py_ssize_t r
+    pixels.size = 0
+    row_start[r0 + 1] = 0
+    for r in range(r0, r1):
+        if _reserve(pixels, pixels.size + w) < 0:
             return -1
-        row = edges + y * step
-        at = (y + 1) * stride + 1  # padded index of row[0]
-        x = 0
-        while x < w:
-            found = _nonzero64(row + x) if x + 64 <= w else _nonzero_tail(row + x, w - x)
-            while found != 0:
-                pad[at + x + _ctz(found)] = EDGE
-                pixels.data[pixels.size] = at + x + _ctz(found)
-                pixels.size += 1
-                found &= found - 1
-            x += 64
+        pixels.size += _collect_row(edges + r * step, w, pad, (r + 1) * stride + 1,
+                                    pixels.data + pixels.size, masks)
+        row_start[r + 2] = pixels.size
     return 0
 
 
-cdef int _thin(
-    unsigned char* pad, Py_ssize_t stride, const Py_ssize_t* pixels, Py_ssize_t n,
-    const unsigned char* removable, int max_iter,
+cdef enum:  # the row steps of the thinning a call of _thin does
+    ALL_STEPS  # (one band)
+    TOP_STEPS  # of rows y < m with y + K <= m - 2: they touch only rows above m
+    BOTTOM_STEPS  # of rows y >= m with y - K >= m + 1: they touch only rows m and below
+    SEAM_STEPS  # the others, after both
+
+
+cdef void _thin(
+    unsigned char* pad, Py_ssize_t stride, Py_ssize_t h, int max_iter, int part, Py_ssize_t m,
+    const Buffers* ws, const unsigned char* removable9,
 ) noexcept nogil:
-    """Checkerboard thinning in place (0 or 1 at the listed pixels). Returns -1 on no memory.
+    """Row steps ``part`` of the thinning (see the module docstring): in round ``r`` every
+    padded row ``y`` with ``y + 2 K = r`` takes row step ``K`` (``K = 2 it + y % 2``,
+    ``it < max_iter``). Rows above ``m`` are listed in ``ws.pixels``, the others in
+    ``ws.pixels2`` (``m > h``: all in ``ws.pixels``).
 
-    ``pixels``: the set pixels, ascending. Class of padded pixel p: parity of its row, then
-    parity of p itself (as ``thin_edges``). Two pixels of one class are never neighbours, so
-    deciding them one after the other in place is deciding them at once.
-
-    A kept pixel is decided again in a later pass only if a neighbour was removed since (a
-    removal marks its neighbours DIRTY): with the same neighbourhood the table gives the same
-    answer. The first pass decides every pixel; Canny output then has few removals left, so
-    the second pass is mostly one load per pixel. The marks left at the end are cleared.
+    Splitting the image at padded row ``m``: a step depends only on the steps before it on the
+    rows next to it, so the top steps (``y + K <= m - 2``) depend only on top steps and the
+    bottom ones only on bottom ones; the two sets touch disjoint rows and can run at once. The
+    remaining seam steps, a few rows around ``m``, run after both, in round order.
     """
-    cdef Py_ssize_t ring[8]
-    cdef Py_ssize_t begin[4]
-    cdef Py_ssize_t end[4]
-    cdef Py_ssize_t i, j, p, row_end
-    cdef int c, it, k, code, changed, odd_row
-    cdef Py_ssize_t q
-    cdef Py_ssize_t* by_class
-    cdef unsigned char* cls
-    if n == 0 or max_iter <= 0:
-        return 0
-    _ring(stride, ring)
-    by_class = <Py_ssize_t*>malloc(n * sizeof(Py_ssize_t))
-    cls = <unsigned char*>malloc(n)
-    if by_class == NULL or cls == NULL:
-        free(by_class)
-        free(cls)
-        return -1
-    for c in range(4):
-        end[c] = 0
-    odd_row = 0
-    row_end = stride
-    for i in range(n):  # ascending pixels: follow the row without a division
-        p = pixels[i]
-        while p >= row_end:
-            row_end += stride
-            odd_row ^= 1
-        c = odd_row * 2 + <int>(p & 1)
-        cls[i] = c
-        end[c] += 1
-    j = 0
-    for c in range(4):
-        begin[c] = j
-        j += end[c]
-        end[c] = begin[c]
-    for i in range(n):
-        c = cls[i]
-        by_class[end[c]] = pixels[i]
-        end[c] += 1
-    free(cls)
-    for it in range(max_iter):
-        changed = 0
-        for c in range(4):
-            j = begin[c]
-            for i in range(begin[c], end[c]):
-                p = by_class[i]
-                by_class[j] = p  # kept pixels move to the front of their class
-                j += 1
-                if it > 0 and pad[p] == EDGE:
-                    continue  # no neighbour removed since this pixel was last kept
-                code = 0
-                for k in range(8):
-                    code = code | ((pad[p + ring[k]] != 0) << k)
-                if not removable[code]:
-                    pad[p] = EDGE
-                    continue
-                pad[p] = 0
-                j -= 1
-                changed = 1
-                for k in range(8):
-                    q = p + ring[k]
-                    pad[q] = pad[q] | (DIRTY if pad[q] != 0 else 0)
-            end[c] = j
-        if not changed:
-            break
-    for c in range(4):  # marks set after a pixel's last decision
-        for i in range(begin[c], end[c]):
-            pad[by_class[i]] = EDGE
-    free(by_class)
-    return 0
+    cdef Py_ssize_t offsets9[9]
+    cdef Py_ssize_t r, y, k, steps = 2 * max(max_iter, 0)
+    cdef bint top, bottom
+    for k in range(9):
+        offsets9[k] = (k % 3 - 1) * stride + k // 3 - 1
+    for r in range(2, h + 2 * steps):
+        k = r & 1  # row step K of padded row r - 2 K: K has the parity of the row, so of r
+        while k < steps:
+            y = r - 2 * k
+            if y < 1:
+                break
+            if y <= h:
+                top = y < m and y + k <= m - 2
+                bottom = y >= m and y - k >= m + 1
+                if part == ALL_STEPS or (part == TOP_STEPS and top) \
+                        or (part == BOTTOM_STEPS and bottom) \
+                        or (part == SEAM_STEPS and not top and not bottom):
+                    if y < m:
+                        _thin_row(pad, stride, ws.pixels.data, ws.row_start[y],
+                                  ws.row_start[y + 1], removable9, offsets9, k < 2)
+                    else:
+                        _thin_row(pad, stride, ws.pixels2.data, ws.row_start2[y],
+                                  ws.row_start2[y + 1], removable9, offsets9, k < 2)
+            k += 2
 
 
 def thin(unsigned char[:, ::1] padded, const unsigned char[::1] removable, int max_iter) -> None:
@@ -279,21 +699,29 @@ def thin(unsigned char[:, ::1] padded, const unsigned char[::1] removable, int m
     removable : uint8 (256,), 1 where the 3x3 neighbourhood code makes the centre removable
     max_iter : maximum number of passes over the four classes
     """
-    cdef Py_ssize_t h = padded.shape[0], w = padded.shape[1]
-    cdef Vec pixels
+    cdef Py_ssize_t h = padded.shape[0], w = padded.shape[1], i
+    cdef unsigned char* pad
+    cdef unsigned char removable9[512]
+    cdef Workspace workspace
+    cdef Buffers* ws
     cdef int status = 0
     if removable.shape[0] != 256:
         raise ValueError("thin needs a removable table of 256 entries")
     if h < 3 or w < 3:
         return
+    workspace = Workspace()
+    ws = &workspace.b
+    pad = &padded[0, 0]
     with nogil:
-        _init(&pixels, 1024)
-        if not pixels.failed:
-            status = _collect(&padded[1, 1], h - 2, w - 2, w, &padded[0, 0], w, &pixels)
+        _removable9(&removable[0], removable9)
+        status = _prepare(ws, h - 2, w - 2)
         if status == 0:
-            status = _thin(&padded[0, 0], w, pixels.data, pixels.size, &removable[0], max_iter)
-        free(pixels.data)
-        status = -1 if pixels.failed else status
+            status = _collect(&padded[1, 1], 0, h - 2, w - 2, w, pad, w, &ws.pixels, ws.row_start,
+                              ws.masks)
+        if status == 0:
+            _thin(pad, w, h - 2, max_iter, ALL_STEPS, h - 1, ws, removable9)
+        for i in range(ws.pixels.size):  # drop the DIRTY marks
+            pad[ws.pixels.data[i]] = pad[ws.pixels.data[i]] != 0
     if status < 0:
         raise MemoryError("thin: out of memory")
 
@@ -310,18 +738,22 @@ cdef void _trace_outer(
     Suzuki and Abe's border following as ``cv2.findContours`` runs it: ``deltas`` are the
     offsets of the directions E, NE, N, NW, W, SW, S, SE, twice. The first neighbour is
     searched clockwise from W, the following ones counterclockwise from the pixel we came from;
-    the trace stops on returning to the start from that first neighbour.
+    the trace stops on returning to the start from that first neighbour. (A probe loop: its
+    exits are mostly predicted, so the loads of the next steps start early; a lookup of the
+    neighbourhood's bit mask instead makes every step wait for the last.)
     """
+    cdef Vec t = trace[0]  # (a local copy: its fields stay in registers; given back below)
     cdef int s = 4
     cdef Py_ssize_t i0 = start, i1, i3, i4
-    trace.size = 0
+    t.size = 0
     while True:
         s = (s - 1) & 7
         i1 = i0 + deltas[s]
         if pad[i1] != 0 or s == 4:
             break
     if s == 4:  # a single pixel
-        _push(trace, i0)
+        _push(&t, i0)
+        trace[0] = t
         return
     i3 = i0
     while True:
@@ -331,11 +763,12 @@ cdef void _trace_outer(
             if pad[i4] != 0:
                 break
         s &= 7
-        _push(trace, i3)
-        if (i4 == i0 and i3 == i1) or trace.failed:
+        _push(&t, i3)
+        if (i4 == i0 and i3 == i1) or t.failed:
             break
         i3 = i4
         s = (s + 4) & 7
+    trace[0] = t
 
 
 cdef Py_ssize_t _chain(
@@ -373,86 +806,408 @@ cdef Py_ssize_t _chain(
 
 
 cdef Py_ssize_t _component(
-    unsigned char* pad, Py_ssize_t start, const Py_ssize_t* ring, Vec* stack
+    unsigned char* pad, const Py_ssize_t* ring, Py_ssize_t start, Vec* stack_buffer,
+    Py_ssize_t* first,
 ) noexcept nogil:
-    """Mark the 8-connected component of ``start`` DONE; return its number of pixels."""
-    cdef Py_ssize_t p, q, size = 1
-    cdef unsigned int todo
+    """Mark the 8-connected component of ``start`` DONE; return its number of pixels and set
+    ``first`` to its smallest padded index.
+
+    The stack and the ring offsets are local copies (the stack is given back at the end): the
+    marks are byte stores, which may alias anything, so values behind a pointer would be read
+    again from memory after every mark. Byte loads here, not ``_edges9``: marks just stored
+    would hold up wider loads.
+    """
+    cdef Vec stack = stack_buffer[0]
+    cdef Py_ssize_t around[8]  # (a local copy too: registers)
+    cdef Py_ssize_t p, q, size = 1, smallest = start
+    cdef unsigned todo
     cdef unsigned char v
     cdef int k
+    for k in range(8):
+        around[k] = ring[k]
     stack.size = 0
     pad[start] = pad[start] | DONE
-    _push(stack, start)
+    _push(&stack, start)
     while stack.size > 0:
         stack.size -= 1
         p = stack.data[stack.size]
         todo = 0  # neighbours on an edge and not yet marked, as bits (no branch per neighbour)
         for k in range(8):
-            v = pad[p + ring[k]]
-            todo = todo | (<unsigned int>((v != 0) & ((v & DONE) == 0)) << k)
+            v = pad[p + around[k]]
+            todo = todo | (<unsigned>((v != 0) & ((v & DONE) == 0)) << k)
         while todo != 0:
-            q = p + ring[_ctz(todo)]
+            q = p + around[_ctz(todo)]
             todo &= todo - 1
             pad[q] = pad[q] | DONE
+            smallest = q if q < smallest else smallest
             size += 1
-            _push(stack, q)
+            _push(&stack, q)
+    stack_buffer[0] = stack
+    first[0] = smallest
     return size
 
 
-# ---------------------------------------------------------------------------------------------
-# per-point gradient and sub-pixel refinement
+ctypedef struct Pipeline:  # the work shared by the threads of link()
+    Py_ssize_t bottom  # 1 once a thread has taken the bottom band
+    Py_ssize_t bottom_done  # 1 once it is collected and thinned (release/acquire)
+    int bottom_status
+    Py_ssize_t published  # chains made so far (ws.published; release/acquire)
+    Py_ssize_t next  # next chain to take
+    Py_ssize_t sampled  # chains sampled
+    Py_ssize_t finished  # 1 when linking is done
+    int status  # the linker's status
+    const Sampler* sampler  # the gradient (to prefetch the start of each chain published)
+    # the call's arguments
+    const unsigned char* edges
+    unsigned char* pad
+    Py_ssize_t h
+    Py_ssize_t w
+    Py_ssize_t m  # the bands: padded rows 1..m - 1 and m..h
+    int max_iter
+    const unsigned char* removable9
+    Buffers* ws
 
 
-cdef inline float _magnitude(short a, short b) noexcept nogil:
-    """float32 hypot of two int16 values (as numpy's: exact square sum, one rounding)."""
-    cdef double fa = a, fb = b
-    return <float>sqrt(fa * fa + fb * fb)
-
-
-cdef inline void _sample(
-    const short* gx, const short* gy, Py_ssize_t h, Py_ssize_t w, Py_ssize_t x, Py_ssize_t y,
-    bint subpixel, double* out_point, float* out_grad,
+cdef int _link_chains(
+    unsigned char* pad, Py_ssize_t stride, Buffers* ws, Py_ssize_t min_length,
+    Py_ssize_t max_length, Pipeline* pipe,
 ) noexcept nogil:
-    """Gradient at pixel (x, y) and, if ``subpixel``, its Devernay position (float32 steps).
+    """Trace and chain every component of the thinned map (``ws.pixels``) with at least
+    ``min_length`` pixels (a chain has at most as many pixels as its component); keep the
+    chains of ``min_length`` to ``max_length`` points (``max_length < 0``: no limit).
 
-    ``gx``, ``gy``: C-contiguous HxW. Along x or y (whichever is closer to the gradient), the
-    vertex of the parabola through the magnitudes at the pixel and its two neighbours, if the
-    pixel is a strict maximum there and both neighbours are inside the image; at most 0.5 px.
+    The chains' pixels go to ``ws.chains`` (room reserved for all pixels), one chain after the
+    other; ``ws.found`` gets three values per chain, sorted by the first: the component's first
+    pixel (smallest padded index), where the chain starts in ``ws.chains`` and its length;
+    ``ws.published`` (room reserved) gets (start, length) in the order the chains are made and,
+    with a ``pipe``, each chain is published there as soon as it is done. Returns -1 when out
+    of memory.
+
+    Components are met row by row (``pixels`` lists a row's even indices before its odd ones):
+    all of a component's pixels lie in or below the row it is met in, so its first pixel is the
+    smallest index of the flood fill, and only components met in one row can be out of order.
     """
-    cdef Py_ssize_t at = y * w + x, step
-    cdef short ax = gx[at], ay = gy[at]
-    cdef bint along_x
-    cdef float m0, mm, mp, denom, offset
-    out_grad[0] = ax
-    out_grad[1] = ay
-    out_point[0] = x
-    out_point[1] = y
-    if not subpixel:
+    cdef Py_ssize_t deltas[16]
+    cdef Py_ssize_t ring[8]
+    cdef Py_ssize_t i, k, p, n, size, first, total = 0
+    cdef Py_ssize_t n_pixels  # (locals: the marks are byte stores, which may alias anything
+    cdef const Py_ssize_t* pixels  # behind a pointer)
+    cdef Py_ssize_t* chains = ws.chains.data
+    cdef Py_ssize_t* published = ws.published.data
+    cdef Py_ssize_t n_published = 0
+    cdef Vec* found = &ws.found
+    cdef unsigned char v
+    cdef int status = 0, band
+    for k in range(8):  # E, NE, N, NW, W, SW, S, SE
+        deltas[k] = (DIRECTION_BITS[k] % 3 - 1) * stride + DIRECTION_BITS[k] // 3 - 1
+        deltas[k + 8] = deltas[k]
+        ring[k] = deltas[k]
+    for band in range(2):  # the top band's pixels, then the bottom band's
+        n_pixels = ws.pixels.size if band == 0 else ws.pixels2.size
+        pixels = ws.pixels.data if band == 0 else ws.pixels2.data
+        for i in range(n_pixels):
+            p = pixels[i]
+            v = pad[p]
+            if v == 0 or v & DONE:  # removed by thinning, or in a component marked
+                continue
+            size = _component(pad, ring, p, &ws.stack, &first)
+            if size < min_length or ws.stack.failed:
+                continue
+            _trace_outer(pad, first, deltas, &ws.trace)
+            if ws.trace.failed or _reserve(found, found.size + 3) < 0:
+                break
+            n = _chain(pad, ws.trace.data, ws.trace.size, chains + total)
+            if n < min_length or (max_length >= 0 and n > max_length):
+                continue
+            k = found.size  # insert by first pixel (only within this row's components)
+            while k > 0 and found.data[k - 3] > first:
+                found.data[k] = found.data[k - 3]
+                found.data[k + 1] = found.data[k - 2]
+                found.data[k + 2] = found.data[k - 1]
+                k -= 3
+            found.data[k] = first
+            found.data[k + 1] = total
+            found.data[k + 2] = n
+            found.size += 3
+            published[2 * n_published] = total
+            published[2 * n_published + 1] = n
+            n_published += 1
+            if pipe != NULL:
+                for k in range(min(n, AHEAD)):  # a sampling thread will start on this chain
+                    _prefetch_point(pipe.sampler, chains[total + k], stride, 1, 1.0 / stride)
+                _store_release(&pipe.published, n_published)
+            total += n
+    ws.chains.size = total
+    ws.published.size = 2 * n_published
+    if ws.stack.failed or ws.trace.failed or found.failed:
+        status = -1
+    return status
+
+
+cdef void _bottom_band(Pipeline* pipe) noexcept nogil:
+    """Collect and thin the bottom band's own steps, unless another thread has taken it."""
+    cdef int status
+    if not _claim(&pipe.bottom, 0):
         return
-    along_x = (ax if ax >= 0 else -ax) >= (ay if ay >= 0 else -ay)
-    if along_x:
-        if x < 1 or x + 1 >= w:
-            return
-        step = 1
-    else:
-        if y < 1 or y + 1 >= h:
-            return
-        step = w
-    m0 = _magnitude(ax, ay)
-    mm = _magnitude(gx[at - step], gy[at - step])
-    mp = _magnitude(gx[at + step], gy[at + step])
-    denom = mm - <float>2.0 * m0
-    denom = denom + mp
-    if not denom < 0:
-        return
-    offset = <float>0.5 * (mm - mp)
-    offset = offset / denom
-    offset = <float>0.5 if offset > <float>0.5 else offset
-    offset = <float>-0.5 if offset < <float>-0.5 else offset
-    if along_x:
-        out_point[0] = <double>x + <double>offset
-    else:
-        out_point[1] = <double>y + <double>offset
+    status = _collect(pipe.edges, pipe.m - 1, pipe.h, pipe.w, pipe.w, pipe.pad, pipe.w + 2,
+                      &pipe.ws.pixels2, pipe.ws.row_start2, pipe.ws.masks2)
+    if status == 0:
+        _thin(pipe.pad, pipe.w + 2, pipe.h, pipe.max_iter, BOTTOM_STEPS, pipe.m, pipe.ws,
+              pipe.removable9)
+    pipe.bottom_status = status
+    _store_release(&pipe.bottom_done, 1)
+
+
+cdef void _link_in_bands(
+    Pipeline* pipe, Py_ssize_t min_length, Py_ssize_t max_length
+) noexcept nogil:
+    """The linking thread's part: the top band, the bottom band too if no other thread has
+    taken it (else wait for it), the seam, then the chains (published as they are made)."""
+    cdef Py_ssize_t stride = pipe.w + 2, spins = 0
+    cdef int status = _collect(pipe.edges, 0, pipe.m - 1, pipe.w, pipe.w, pipe.pad, stride,
+                               &pipe.ws.pixels, pipe.ws.row_start, pipe.ws.masks)
+    if status == 0:
+        _thin(pipe.pad, stride, pipe.h, pipe.max_iter, TOP_STEPS, pipe.m, pipe.ws,
+              pipe.removable9)
+    _bottom_band(pipe)
+    while not _load_acquire(&pipe.bottom_done):
+        _pause()
+        spins += 1
+        if spins % 256 == 0:
+            _yield()
+    if status == 0:
+        status = pipe.bottom_status
+    if status == 0:
+        _thin(pipe.pad, stride, pipe.h, pipe.max_iter, SEAM_STEPS, pipe.m, pipe.ws,
+              pipe.removable9)
+        status = _reserve_links(pipe.ws, True)
+    if status == 0:
+        status = _link_chains(pipe.pad, stride, pipe.ws, min_length, max_length, pipe)
+    pipe.status = status
+    _store_release(&pipe.finished, 1)
+
+
+cdef void _sample_published(
+    Pipeline* pipe, const Buffers* ws, Py_ssize_t stride, Sampler* s
+) noexcept nogil:
+    """Take published chains one at a time and sample them into ``ws.points`` and
+    ``ws.gradients`` (at their rows in ``ws.chains``) until linking is finished and every chain
+    is taken. Waits for chains by spinning (yielding now and then)."""
+    cdef Py_ssize_t c, start, n, spins = 0
+    while True:
+        c = _load_relaxed(&pipe.next)
+        if c < _load_acquire(&pipe.published):
+            if _claim(&pipe.next, c):
+                start = ws.published.data[2 * c]
+                n = ws.published.data[2 * c + 1]
+                s.points = ws.points + 2 * start
+                s.gradients = ws.gradients + 2 * start
+                s.done = 0
+                _sample_run(s, ws.chains.data + start, n, stride, 1)
+                _add_release(&pipe.sampled, 1)
+            continue
+        if _load_acquire(&pipe.finished):
+            if _load_relaxed(&pipe.next) >= _load_acquire(&pipe.published):
+                return
+            continue
+        _pause()
+        spins += 1
+        if spins % 256 == 0:
+            _yield()
+
+
+# ---------------------------------------------------------------------------------------------
+# the batch entry points
+
+
+cdef void _emit_pixels(
+    const Py_ssize_t* chain_points, Py_ssize_t n, Py_ssize_t stride, Py_ssize_t shift,
+    int* points,
+) noexcept nogil:
+    """``n`` points given as linear indices (row ``stride``, a border of ``shift``) as (x, y)
+    rows of ``points``."""
+    cdef Py_ssize_t i, p, y
+    cdef double inverse = 1.0 / stride
+    for i in range(n):
+        p = chain_points[i]
+        y = _row_of(p, stride, inverse)
+        points[2 * i] = <int>(p - y * stride - shift)
+        points[2 * i + 1] = <int>(y - shift)
+
+
+cdef inline void _start_sampler(
+    Sampler* s, const short* gx, const short* gy, Py_ssize_t h, Py_ssize_t w, bint subpixel,
+    double* points, float* gradients,
+) noexcept nogil:
+    s.gx = gx
+    s.gy = gy
+    s.h = h
+    s.w = w
+    s.subpixel = subpixel
+    s.points = points
+    s.gradients = gradients
+    s.done = 0
+    s.count = 0
+
+
+def link(
+    const unsigned char[:, ::1] edges, unsigned char[:, ::1] work,
+    const unsigned char[::1] removable, int max_iter, Py_ssize_t min_length,
+    Py_ssize_t max_length, const short[:, ::1] gx=None, const short[:, ::1] gy=None,
+    bint subpixel=False, Workspace workspace=None, int num_threads=1,
+):
+    """Thin, trace and chain the edge map; see the module docstring.
+
+    Parameters
+    ----------
+    edges : uint8 HxW, nonzero on edges
+    work : uint8 (H+2)x(W+2), all zero; left all zero
+    removable : uint8 (256,) thinning table
+    max_iter : thinning passes
+    min_length, max_length : keep chains with that many pixels (max < 0: no limit)
+    gx, gy : int16 HxW gradient, or None
+    subpixel : with ``gx``, ``gy``: refine the points
+    workspace : buffers kept between calls (None: fresh ones)
+    num_threads : threads (with a gradient: the bottom band of the thinning and the sampling
+        are shared; the result does not depend on it)
+
+    Returns
+    -------
+    Without a gradient ``(points, offsets)``: int32 (N, 2) pixels ``(x, y)``, int64 (K+1,).
+    With one ``(points, offsets, gradients, closed)``: float64 (N, 2), int64 (K+1,),
+    float32 (N, 2), bool (K,) (first and last pixel 8-neighbours, more than two pixels).
+    """
+    cdef Py_ssize_t h = edges.shape[0], w = edges.shape[1], stride = w + 2
+    cdef Py_ssize_t i, k, n, at, n_chains, total, first, last, spins = 0
+    cdef bint with_gradient = gx is not None
+    cdef bint threaded = with_gradient and num_threads > 1 and h >= MIN_THREADED_ROWS \
+        and h * w >= MIN_THREADED_AREA
+    cdef unsigned char* pad
+    cdef unsigned char removable9[512]
+    cdef Buffers* ws
+    cdef Pipeline pipe
+    cdef Pipeline* shared = &pipe  # (the threads share it through a pointer)
+    cdef Sampler sampler
+    cdef Sampler* own
+    cdef int status = 0
+    cdef int[:, ::1] out_pixels
+    cdef double[:, ::1] out_points
+    cdef float[:, ::1] out_gradients
+    cdef long long[::1] out_offsets
+    cdef unsigned char[::1] out_closed
+    if work.shape[0] != h + 2 or work.shape[1] != w + 2:
+        raise ValueError("link: the work map must be (H+2)x(W+2)")
+    if removable.shape[0] != 256:
+        raise ValueError("link needs a removable table of 256 entries")
+    if with_gradient and (
+        gy is None or gx.shape[0] != h or gx.shape[1] != w or gy.shape[0] != h
+        or gy.shape[1] != w
+    ):
+        raise ValueError("link: gx and gy must both have the shape of the edge map")
+    if num_threads < 1:
+        raise ValueError(f"num_threads must be >= 1, got {num_threads}")
+    if workspace is None:
+        workspace = Workspace()
+    ws = &workspace.b
+    pad = &work[0, 0]
+    with nogil:
+        _removable9(&removable[0], removable9)
+        status = _prepare(ws, h, w)
+        if status == 0 and not threaded:
+            status = _collect(&edges[0, 0], 0, h, w, w, pad, stride, &ws.pixels, ws.row_start,
+                              ws.masks)
+            if status == 0:
+                _thin(pad, stride, h, max_iter, ALL_STEPS, h + 1, ws, removable9)
+                status = _reserve_links(ws, False)
+            if status == 0:
+                status = _link_chains(pad, stride, ws, min_length, max_length, NULL)
+        elif status == 0:
+            pipe.bottom = 0
+            pipe.bottom_done = 0
+            pipe.bottom_status = 0
+            pipe.published = 0
+            pipe.next = 0
+            pipe.sampled = 0
+            pipe.finished = 0
+            pipe.status = 0
+            _start_sampler(&sampler, &gx[0, 0], &gy[0, 0], h, w, subpixel, NULL, NULL)
+            pipe.sampler = &sampler
+            pipe.edges = &edges[0, 0]
+            pipe.pad = pad
+            pipe.h = h
+            pipe.w = w
+            pipe.m = 1 + h // 2
+            pipe.max_iter = max_iter
+            pipe.removable9 = removable9
+            pipe.ws = ws
+            with parallel(num_threads=num_threads):
+                own = <Sampler*>malloc(sizeof(Sampler))  # (one per thread, ~2 kB)
+                if own != NULL:
+                    _start_sampler(own, &gx[0, 0], &gy[0, 0], h, w, subpixel, NULL, NULL)
+                if threadid() == 0:
+                    _link_in_bands(shared, min_length, max_length)
+                    if own == NULL:
+                        shared.status = -1
+                else:
+                    _bottom_band(shared)
+                if own != NULL:
+                    _sample_published(shared, ws, stride, own)
+                free(own)
+                if threadid() == 0:  # the chains taken by other threads are done
+                    while _load_acquire(&shared.sampled) < _load_relaxed(&shared.next):
+                        _pause()
+            status = pipe.status
+        for i in range(ws.pixels.size):
+            pad[ws.pixels.data[i]] = 0
+        for i in range(ws.pixels2.size):
+            pad[ws.pixels2.data[i]] = 0
+    if status < 0:
+        raise MemoryError("link: out of memory")
+    n_chains = ws.found.size // 3  # output order: the reverse of ``found``
+    total = ws.chains.size
+    offsets = np.empty(n_chains + 1, np.int64)
+    out_offsets = offsets
+    with nogil:
+        out_offsets[0] = 0
+        for k in range(n_chains):
+            out_offsets[k + 1] = out_offsets[k] + ws.found.data[3 * (n_chains - 1 - k) + 2]
+    if not with_gradient:
+        pixels_out = np.empty((total, 2), np.int32)
+        out_pixels = pixels_out
+        with nogil:
+            for k in range(n_chains):
+                _emit_pixels(ws.chains.data + ws.found.data[3 * (n_chains - 1 - k) + 1],
+                             out_offsets[k + 1] - out_offsets[k], stride, 1,
+                             &out_pixels[out_offsets[k], 0])
+        return pixels_out, offsets
+    points = np.empty((total, 2), np.float64)
+    gradients = np.empty((total, 2), np.float32)
+    closed = np.empty(n_chains, np.bool_)
+    out_closed = closed.view(np.uint8)
+    if total > 0:
+        out_points = points
+        out_gradients = gradients
+        with nogil:
+            for k in range(n_chains):
+                at = ws.found.data[3 * (n_chains - 1 - k) + 1]
+                n = out_offsets[k + 1] - out_offsets[k]
+                if threaded:  # sampled in chain order: copy into place
+                    memcpy(&out_points[out_offsets[k], 0], ws.points + 2 * at,
+                           2 * n * sizeof(double))
+                    memcpy(&out_gradients[out_offsets[k], 0], ws.gradients + 2 * at,
+                           2 * n * sizeof(float))
+                else:  # the pixels in output order, sampled below in one run
+                    memcpy(ws.ordered.data + out_offsets[k], ws.chains.data + at,
+                           n * sizeof(Py_ssize_t))
+                first = ws.chains.data[at]
+                last = ws.chains.data[at + n - 1]
+                out_closed[k] = n > 2 and -1 <= first % stride - last % stride <= 1 \
+                    and -1 <= first // stride - last // stride <= 1
+            if not threaded:
+                _start_sampler(&sampler, &gx[0, 0], &gy[0, 0], h, w, subpixel,
+                               &out_points[0, 0], &out_gradients[0, 0])
+                _sample_run(&sampler, ws.ordered.data, total, stride, 1)
+    return points, offsets, gradients, closed
 
 
 def sample(
@@ -470,207 +1225,20 @@ def sample(
     out_gradients : float32 (N, 2), written
     """
     cdef Py_ssize_t n = points.shape[0], h = gx.shape[0], w = gx.shape[1], i
+    cdef Sampler sampler
     if out_points.shape[0] != n or out_gradients.shape[0] != n or gy.shape[0] != h \
             or gy.shape[1] != w:
         raise ValueError("sample: outputs must have one row per point, gx and gy one shape")
     if n == 0:
         return
-    with nogil:  # one thread: ~10 ns a point, too short to be worth a parallel region
-        for i in range(n):
-            _sample(&gx[0, 0], &gy[0, 0], h, w, points[i, 0], points[i, 1], subpixel,
-                    &out_points[i, 0], &out_gradients[i, 0])
-
-
-# ---------------------------------------------------------------------------------------------
-# the batch entry points
-
-
-cdef void _emit_pixels(
-    const Py_ssize_t* chain_points, const Py_ssize_t* starts, Py_ssize_t n_chains, bint reverse,
-    Py_ssize_t stride, Py_ssize_t shift, int[:, ::1] points, long long[::1] offsets,
-) noexcept nogil:
-    """Chains as (x, y) pixels with offsets, in the stored or in the reverse chain order."""
-    cdef Py_ssize_t k, src, i, j = 0, p, y
-    cdef double inverse = 1.0 / stride
-    offsets[0] = 0
-    for k in range(n_chains):
-        src = n_chains - 1 - k if reverse else k
-        for i in range(starts[src], starts[src + 1]):
-            p = chain_points[i]
-            y = _row_of(p, stride, inverse)
-            points[j, 0] = <int>(p - y * stride - shift)
-            points[j, 1] = <int>(y - shift)
-            j += 1
-        offsets[k + 1] = j
-
-
-cdef void _sample_points(
-    const Py_ssize_t* points, Py_ssize_t begin, Py_ssize_t end, Py_ssize_t stride,
-    const short* gx, const short* gy, Py_ssize_t h, Py_ssize_t w, bint subpixel,
-    double* out_points, float* out_gradients,
-) noexcept nogil:
-    """``_sample`` at the padded indices ``points[begin:end]`` (one-pixel border), written to
-    rows ``begin:end`` of ``out_points`` and ``out_gradients`` (N x 2 each).
-
-    The gradient at a point and at its neighbours above and below is prefetched AHEAD points
-    early: a chain wanders over the image, so its points' rows are mostly not in cache and the
-    loop would otherwise wait on memory.
-    """
-    cdef Py_ssize_t i, p, y
-    cdef double inverse = 1.0 / stride
-    for i in range(begin, end):
-        if i + AHEAD < end:
-            p = points[i + AHEAD]
-            y = _row_of(p, stride, inverse) - 1  # image row and index of that point
-            p = p - (y + 1) * stride - 1 + y * w
-            _prefetch(gx + p)
-            _prefetch(gy + p)
-            if 0 < y < h - 1:
-                _prefetch(gx + p - w)
-                _prefetch(gy + p - w)
-                _prefetch(gx + p + w)
-                _prefetch(gy + p + w)
-        p = points[i]
-        y = _row_of(p, stride, inverse)
-        _sample(gx, gy, h, w, p - y * stride - 1, y - 1, subpixel, out_points + 2 * i,
-                out_gradients + 2 * i)
-
-
-def link(
-    const unsigned char[:, ::1] edges, unsigned char[:, ::1] work,
-    const unsigned char[::1] removable, int max_iter, Py_ssize_t min_length,
-    Py_ssize_t max_length, const short[:, ::1] gx=None, const short[:, ::1] gy=None,
-    bint subpixel=False,
-):
-    """Thin, trace and chain the edge map; see the module docstring.
-
-    Parameters
-    ----------
-    edges : uint8 HxW, nonzero on edges
-    work : uint8 (H+2)x(W+2), all zero; left all zero
-    removable : uint8 (256,) thinning table
-    max_iter : thinning passes
-    min_length, max_length : keep chains with that many pixels (max < 0: no limit)
-    gx, gy : int16 HxW gradient, or None
-    subpixel : with ``gx``, ``gy``: refine the points
-
-    Returns
-    -------
-    Without a gradient ``(points, offsets)``: int32 (N, 2) pixels ``(x, y)``, int64 (K+1,).
-    With one ``(points, offsets, gradients, closed)``: float64 (N, 2), int64 (K+1,),
-    float32 (N, 2), bool (K,) (first and last pixel 8-neighbours, more than two pixels).
-    """
-    cdef Py_ssize_t h = edges.shape[0], w = edges.shape[1], stride = w + 2
-    cdef Py_ssize_t i, k, p, n, size, n_chains = 0, total = 0, j, first, last
-    cdef Py_ssize_t ring[8]
-    cdef Py_ssize_t deltas[16]
-    cdef bint with_gradient = gx is not None
-    cdef unsigned char* pad
-    cdef Vec pixels, trace, stack, chains, starts
-    cdef int status = 0
-    cdef Py_ssize_t* ordered = NULL
-    cdef int[:, ::1] out_pixels
-    cdef double[:, ::1] out_points
-    cdef float[:, ::1] out_gradients
-    cdef long long[::1] out_offsets
-    cdef unsigned char[::1] out_closed
-    if work.shape[0] != h + 2 or work.shape[1] != w + 2:
-        raise ValueError("link: the work map must be (H+2)x(W+2)")
-    if removable.shape[0] != 256:
-        raise ValueError("link needs a removable table of 256 entries")
-    if with_gradient and (
-        gy is None or gx.shape[0] != h or gx.shape[1] != w or gy.shape[0] != h
-        or gy.shape[1] != w
-    ):
-        raise ValueError("link: gx and gy must both have the shape of the edge map")
-    pad = &work[0, 0]
-    _ring(stride, ring)
-    for k in range(8):  # E, NE, N, NW, W, SW, S, SE: the ring read backwards from E
-        deltas[k] = ring[(10 - k) & 7]
-        deltas[k + 8] = deltas[k]
     with nogil:
-        _init(&pixels, 4096)
-        _init(&trace, 4096)
-        _init(&stack, 1024)
-        _init(&starts, 256)
-        chains.data = NULL
-        chains.failed = 1
-        status = -1
-        if not (pixels.failed or trace.failed or stack.failed or starts.failed):
-            status = _collect(&edges[0, 0], h, w, w, pad, stride, &pixels)
-            if status == 0:
-                status = _thin(pad, stride, pixels.data, pixels.size, &removable[0], max_iter)
-        if status == 0:
-            _init(&chains, pixels.size)
-            status = -1 if chains.failed else 0
-        if status == 0:
-            _push(&starts, 0)
-            for i in range(pixels.size):
-                p = pixels.data[i]
-                if pad[p] != EDGE:  # removed by thinning, or in a component already linked
-                    continue
-                size = _component(pad, p, ring, &stack)
-                if size < min_length:  # a chain has at most as many pixels as its component
-                    continue
-                _trace_outer(pad, p, deltas, &trace)
-                if trace.failed:
-                    break
-                n = _chain(pad, trace.data, trace.size, chains.data + total)
-                if n >= min_length and (max_length < 0 or n <= max_length):
-                    total += n
-                    n_chains += 1
-                    _push(&starts, total)
-            if trace.failed or stack.failed or starts.failed:
-                status = -1
-        for i in range(pixels.size):
-            pad[pixels.data[i]] = 0
-        free(pixels.data)
-        free(trace.data)
-        free(stack.data)
-    if status < 0:
-        free(chains.data)
-        free(starts.data)
-        raise MemoryError("link: out of memory")
-    try:
-        offsets = np.empty(n_chains + 1, np.int64)
-        out_offsets = offsets
-        if not with_gradient:
-            pixels_out = np.empty((total, 2), np.int32)
-            out_pixels = pixels_out
-            with nogil:
-                _emit_pixels(chains.data, starts.data, n_chains, True, stride, 1, out_pixels,
-                             out_offsets)
-            return pixels_out, offsets
-        points = np.empty((total, 2), np.float64)
-        gradients = np.empty((total, 2), np.float32)
-        closed = np.empty(n_chains, np.bool_)
-        out_points = points
-        out_gradients = gradients
-        out_closed = closed.view(np.uint8)
-        with nogil:
-            ordered = <Py_ssize_t*>malloc((total + 1) * sizeof(Py_ssize_t))
-            if ordered != NULL:
-                out_offsets[0] = 0
-                j = 0
-                for k in range(n_chains):
-                    i = n_chains - 1 - k
-                    n = starts.data[i + 1] - starts.data[i]
-                    memcpy(ordered + j, chains.data + starts.data[i], n * sizeof(Py_ssize_t))
-                    first = ordered[j]
-                    last = ordered[j + n - 1]
-                    j += n
-                    out_offsets[k + 1] = j
-                    out_closed[k] = n > 2 and -1 <= first % stride - last % stride <= 1 \
-                        and -1 <= first // stride - last // stride <= 1
-                _sample_points(ordered, 0, total, stride, &gx[0, 0], &gy[0, 0], h, w, subpixel,
-                               &out_points[0, 0], &out_gradients[0, 0])
-        if ordered == NULL:
-            raise MemoryError("link: out of memory")
-        return points, offsets, gradients, closed
-    finally:
-        free(ordered)
-        free(chains.data)
-        free(starts.data)
+        _start_sampler(&sampler, &gx[0, 0], &gy[0, 0], h, w, subpixel, &out_points[0, 0],
+                       &out_gradients[0, 0])
+        for i in range(n):
+            if i + AHEAD < n:
+                _prefetch_pixel(&sampler, points[i + AHEAD, 0], points[i + AHEAD, 1])
+            _gather(&sampler, points[i, 0], points[i, 1])
+        _flush(&sampler)
 
 
 def chains_from_traces(
@@ -723,8 +1291,10 @@ def chains_from_traces(
         out_pixels = pixels_out
         out_offsets = offsets
         with nogil:
-            _emit_pixels(chain_points, starts.data, n_chains, False, stride, 0, out_pixels,
-                         out_offsets)
+            for k in range(n_chains + 1):
+                out_offsets[k] = starts.data[k]
+            if total > 0:
+                _emit_pixels(chain_points, total, stride, 0, &out_pixels[0, 0])
         return pixels_out, offsets
     finally:
         free(lin)
