@@ -30,13 +30,14 @@ Implementation: the per-edge integrals are summed per contour by the compiled sh
 :func:`labauto.vision.descriptors.measure_contours`), in the same call as the descriptors. There
 the factor ``e^{in phi}`` is folded into per-vertex powers: with ``w = e^{i theta}`` at the edge's
 ends, ``e^{in phi} int e^{inu} du = (w1^n - w0^n) / (in)``, so each vertex's powers serve both of
-its edges, and the ``r^-2`` sums are taken by parts: ``sum_edges c (w1^n - w0^n) =
-sum_vertices (c_in - c_out) w^n`` (``c``: an edge's coefficient ``1 / (2 d^2)`` or
-``e^{2i phi} / (4 d^2)``), one pass over each vertex's powers instead of three complex products
-per edge and harmonic. (Summation order is a rounding matter only; where an edge's line passes
-within ~1e-4 of the centre, ``1 / d^2`` is large and the coefficients of any summation order
-carry ~1e-10 relative rounding.) :func:`classify_shapes` labels all contours of an image in one
-kernel call; the single-contour functions are a batch of one.
+its edges, and the ``r^-2`` terms are gathered per harmonic: ``sum_edges c (w1^n - w0^n)``
+(``c``: an edge's coefficient ``1 / (2 d^2)`` or ``e^{2i phi} / (4 d^2)``) for every ``n``, a few
+multiply-adds per edge and harmonic instead of three complex products. The kernel goes
+harmonic by harmonic, each a vectorised pass over all vertices and edges. (Summation order is a
+rounding matter only; where an edge's line passes close to the centre, ``1 / d^2`` is large and
+the ``r^-2`` coefficients of any summation order carry rounding of that size: ~1e-10 of the 0th
+for a line 0.004 px from the centre.) :func:`classify_shapes` labels all contours of an image in
+one kernel call; the single-contour functions are a batch of one.
 """
 
 from __future__ import annotations
@@ -234,21 +235,19 @@ def shape_features(
     descriptors = shape_descriptors(pts, closed=closed)
     n_harmonics = max(int(n_harmonics), 3)
     r, rho, star = _polar_series(pts, centroid, n_harmonics, n_harmonics)
-    harmonics, axis_ratio, angle, deviation = _ellipse_measures(r[None], rho[None])
+    harmonics, axis_ratio, deviation = _ellipse_measures(r[None], rho[None])
     return ShapeFeatures(
         harmonics=harmonics[0],
         axis_ratio=float(axis_ratio[0]),
-        ellipse_angle=float(angle[0]),
+        ellipse_angle=float(_ellipse_angle(rho[None])[0]),
         ellipse_deviation=float(deviation[0]),
         star_shapedness=star,
         descriptors=descriptors,
     )
 
 
-def _ellipse_measures(
-    r: np.ndarray, rho: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Normalised harmonics of ``r``, axis ratio, ellipse angle and ellipse deviation.
+def _ellipse_measures(r: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Normalised harmonics of ``r``, axis ratio and ellipse deviation (what the label reads).
 
     ``r`` and ``rho`` are (K, n + 1) complex coefficients of ``r`` and ``r^-2`` (n >= 2 for
     ``rho``); see :class:`ShapeFeatures`.
@@ -263,9 +262,13 @@ def _ellipse_measures(
         rest = np.abs(np.concatenate((rho[:, 1:2], rho[:, 3:]), axis=1)) / rho_mean[:, None]
         deviation = np.sqrt(np.sum(rest**2, axis=1))
         axis_ratio = np.sqrt((1.0 - kappa) / (1.0 + kappa))
-    # rho is smallest along the major axis: rho_2 = -kappa * rho_mean * e^{2i psi}
-    angle = np.degrees(0.5 * np.angle(-rho[:, 2])) % 180.0
-    return harmonics, axis_ratio, angle, deviation
+    return harmonics, axis_ratio, deviation
+
+
+def _ellipse_angle(rho: np.ndarray) -> np.ndarray:
+    """Direction of the major axis (degrees in [0, 180)) from (K, n + 1) coefficients of
+    ``r^-2``: rho is smallest along the major axis, rho_2 = -kappa * rho_mean * e^{2i psi}."""
+    return np.degrees(0.5 * np.angle(-rho[:, 2])) % 180.0
 
 
 def classify_shape(
@@ -472,7 +475,7 @@ def _classify(
     valid = (measured.status == _kernel.OK) & finite
     line = v["elongation"] >= th.line_elongation
     rect = v["rectangularity"]
-    harmonics, axis_ratio, _, deviation = _ellipse_measures(measured.r, measured.rho)
+    harmonics, axis_ratio, deviation = _ellipse_measures(measured.r, measured.rho)
     allowance = th.raster_allowance_px / np.maximum(v["semi_minor"], 1e-9)
     ellipse_like = deviation <= th.ellipse_max_deviation + allowance
     conditions = [
@@ -486,9 +489,11 @@ def _classify(
         (harmonics[:, 3] >= th.triangle_min_h3) & (rect <= th.triangle_max_rectangularity),
         (d_alpha < des_threshold_deg) & (deviation <= th.des_max_deviation + allowance),
     ]
-    # label index into SHAPE_LABELS: first matching condition
+    # label index into SHAPE_LABELS: the first matching condition (set last), else "other"
     choices = [5, 6, 4, 0, 1, 3, 2]  # line, other, rectangle, circle, ellipse, triangle, des
-    code = np.select(conditions, choices, default=6)
+    code = np.full(len(valid), 6)
+    for condition, choice in zip(conditions[::-1], choices[::-1], strict=True):
+        code[condition] = choice
     code[~valid] = -1
     labels = [None if c < 0 else SHAPE_LABELS[c] for c in code.tolist()]
     return labels, measured.status

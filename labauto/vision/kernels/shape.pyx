@@ -1,5 +1,5 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
-# distutils: extra_compile_args = -fno-math-errno
+# distutils: extra_compile_args = -fno-math-errno -fno-trapping-math
 """Shape kernel: Table 1 descriptors and the exact polar series (eq. 4) of many contours.
 
 See :mod:`labauto.vision.descriptors` and :mod:`labauto.vision.harmonics` for the definitions
@@ -10,20 +10,26 @@ threads), drops repeated points, then computes
 * the area and area centroid of the polygon (about the vertex mean), the curve centroid when
   there is no area, the semi-axes from the second moments, the perimeter;
 * the convex hull (monotone chain after a natural merge sort: an ordered contour is made of a
-  few x-monotone runs) and the minimum-area box around it (rotating calipers);
+  few x-monotone runs) and the minimum-area box around it (rotating calipers, each caliper's
+  next five heights at once);
 * optionally the Fourier coefficients of ``r`` and ``r^-2`` about the centre, exact per edge
-  (``r^-2`` summed by parts over the vertices, see :func:`_series`).
+  (see :func:`_series`), harmonic by harmonic in vectorised passes over all vertices and edges;
+  the sums over the edges run in LANES partial sums (added up in a fixed order), and atan2 and
+  log in branch-free versions that vectorise (:func:`_atan2`, :func:`_log`: 1-2 ulp).
 
-Compiled with ``-fno-math-errno`` (second line) so that loops with ``sqrt`` vectorise.
+Compiled with ``-fno-math-errno`` (second line) so that loops with ``sqrt`` vectorise, and
+``-fno-trapping-math`` so that selects (``a if c else b``) on computed values vectorise too (it
+changes no result: it lets the compiler compute both sides).
 
-Everything is float64 and per contour in a fixed order, so a contour's results do not depend on
-the other contours of the batch.
+Everything is float64 and per contour in a fixed order (the descriptors' sums in vertex order),
+so a contour's results do not depend on the other contours of the batch or the thread count.
 """
 
 from cython.parallel cimport parallel, prange
-from libc.math cimport INFINITY, NAN, atan2, fabs, isfinite, log, nearbyint, sqrt
-from libc.stdint cimport int64_t
+from libc.math cimport INFINITY, NAN, copysign, fabs, isfinite, nearbyint, sqrt
+from libc.stdint cimport int64_t, uint64_t, uintptr_t
 from libc.stdlib cimport free, malloc
+from libc.string cimport memcpy
 
 import numpy as np
 
@@ -41,6 +47,7 @@ cdef enum:
     S_SERIES_BAD_CENTRE = 3  # the given centre is not finite
     S_SERIES_NO_WINDING = 4  # the contour does not wind around the centre
     NV = 14  # len(VALUE_NAMES)
+    LANES = 8  # partial sums of a vectorised reduction (8 doubles: one AVX-512 register)
 
 OK, TOO_FEW_POINTS, NON_FINITE, ONE_POINT, NEGATIVE_MOMENTS = (
     S_OK, S_TOO_FEW_POINTS, S_NON_FINITE, S_ONE_POINT, S_NEGATIVE_MOMENTS
@@ -69,6 +76,11 @@ cdef double NO_AREA_COMPACTNESS = 1e-9  # below it a polygon has no area (a trac
 # ------------------------------------------------------------------------------ small pieces
 
 
+cdef inline Py_ssize_t _round_up(Py_ssize_t n) noexcept nogil:
+    """n rounded up to a multiple of LANES (whole 64-byte lines of doubles)."""
+    return (n + LANES - 1) // LANES * LANES
+
+
 cdef Py_ssize_t _dedup(const double* src, Py_ssize_t n, bint closed, double* dst) noexcept nogil:
     """Copy points unequal to their predecessor (if closed, drop a last one equal to the first)."""
     cdef Py_ssize_t i, m = 0
@@ -85,21 +97,23 @@ cdef Py_ssize_t _dedup(const double* src, Py_ssize_t n, bint closed, double* dst
     return m
 
 
-cdef void _area_centroid(const double* p, Py_ssize_t n, double* out) noexcept nogil:
-    """out = (signed area, centroid x, centroid y) about the vertex mean; the mean when no area."""
-    cdef Py_ssize_t i, j
-    cdef double mx = 0.0, my = 0.0, px, py, qx, qy, c, s = 0.0, sx = 0.0, sy = 0.0
+cdef inline double _lanes_sum(const double* acc) noexcept nogil:
+    """Sum of the LANES partial sums of a reduction, in a fixed order."""
+    return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]))
+
+
+cdef void _area_about(
+    const double* p, Py_ssize_t n, double mx, double my, double* out,
+) noexcept nogil:
+    """out = (signed area, centroid x, centroid y) of the polygon p (n vertices, vertex 0 again
+    at n) summed about (mx, my), the vertex mean; the mean when no area."""
+    cdef Py_ssize_t i
+    cdef double px, py, qx, qy, c, s = 0.0, sx = 0.0, sy = 0.0
     for i in range(n):
-        mx += p[2 * i]
-        my += p[2 * i + 1]
-    mx /= n
-    my /= n
-    for i in range(n):
-        j = i + 1 if i + 1 < n else 0
         px = p[2 * i] - mx
         py = p[2 * i + 1] - my
-        qx = p[2 * j] - mx
-        qy = p[2 * j + 1] - my
+        qx = p[2 * i + 2] - mx
+        qy = p[2 * i + 3] - my
         c = px * qy - qx * py
         s += c
         sx += (px + qx) * c
@@ -112,6 +126,17 @@ cdef void _area_centroid(const double* p, Py_ssize_t n, double* out) noexcept no
     else:
         out[1] = mx + sx / (6.0 * s)
         out[2] = my + sy / (6.0 * s)
+
+
+cdef void _area_centroid(const double* p, Py_ssize_t n, double* out) noexcept nogil:
+    """out = (signed area, centroid x, centroid y) about the vertex mean; the mean when no area
+    (p: n vertices, vertex 0 again at n)."""
+    cdef Py_ssize_t i
+    cdef double mx = 0.0, my = 0.0
+    for i in range(n):
+        mx += p[2 * i]
+        my += p[2 * i + 1]
+    _area_about(p, n, mx / n, my / n, out)
 
 
 cdef inline bint _less(const double* a, const double* b) noexcept nogil:
@@ -259,30 +284,35 @@ cdef inline Py_ssize_t _walk(
     const double* h, Py_ssize_t m, Py_ssize_t j, const double* o, double ux, double uy,
 ) noexcept nogil:
     """From vertex j, the first vertex along the hull whose successor is lower in direction
-    (ux, uy) (heights about o; at most m steps).
+    (ux, uy) (heights about o; at most m steps; h holds vertices 0, 1, 2, 3 again after m - 1).
 
-    Between two hull edges an extreme vertex moves 0 or 1 steps, seldom more, and the two are
-    about equally likely: the first two steps are taken without branches (selects on locals),
-    so the one branch left (a third step) is predictable."""
-    cdef Py_ssize_t jn, steps = 2
-    cdef double cur = _dot(h + 2 * j, o, ux, uy), nxt
-    cdef bint take
-    jn = j + 1 if j + 1 < m else 0
-    nxt = _dot(h + 2 * jn, o, ux, uy)
-    take = not (nxt < cur)
-    j = jn if take else j
-    cur = nxt if take else cur
-    jn = j + 1 if j + 1 < m else 0
-    nxt = _dot(h + 2 * jn, o, ux, uy)
-    take = take & (not (nxt < cur))
-    j = jn if take else j
-    cur = nxt if take else cur
+    Between two hull edges an extreme vertex moves 0, 1, 2, 3 or more steps about 45, 35, 13,
+    4 and 3 % of the time (short and long hull edges alternate): the heights of j..j + 4 are
+    computed at once (independent loads) and the steps counted without branches; a fifth step
+    and on goes by a loop."""
+    cdef Py_ssize_t jn, steps
+    cdef double d0, d1, d2, d3, d4, nxt
+    cdef bint s1, s2, s3, s4, take
+    d0 = _dot(h + 2 * j, o, ux, uy)
+    d1 = _dot(h + 2 * j + 2, o, ux, uy)
+    d2 = _dot(h + 2 * j + 4, o, ux, uy)
+    d3 = _dot(h + 2 * j + 6, o, ux, uy)
+    d4 = _dot(h + 2 * j + 8, o, ux, uy)
+    s1 = not (d1 < d0)
+    s2 = s1 & (not (d2 < d1))
+    s3 = s2 & (not (d3 < d2))
+    s4 = s3 & (not (d4 < d3))
+    steps = s1 + s2 + s3 + s4
+    steps = m if steps > m else steps  # (a triangle: once round at most)
+    j += steps
+    j = j - m if j >= m else j
+    take = s4
     while take and steps < m:
         jn = j + 1 if j + 1 < m else 0
         nxt = _dot(h + 2 * jn, o, ux, uy)
-        take = not (nxt < cur)
+        take = not (nxt < d4)
         j = jn if take else j
-        cur = nxt if take else cur
+        d4 = nxt if take else d4
         steps += 1
     return j
 
@@ -292,10 +322,12 @@ cdef void _min_area_box(const double* h, Py_ssize_t m, double* u, double* side) 
     counter-clockwise): rotating calipers, one side of the box on each hull edge in turn; of
     boxes with the same area (to 1e-12) the least elongated.
 
-    Two passes: the unit directions of all edges into u (2 m doubles; one loop, square roots
-    and divisions vectorised), then the calipers (:func:`_walk`)."""
+    Two passes: the unit directions of all edges into u (one loop, square roots and divisions
+    vectorised), then the calipers (:func:`_walk`, on a copy of h that goes on for 4 vertices
+    past the last; u: 4 m + 8 doubles)."""
     cdef Py_ssize_t i, j, far = 0, hi = 0, lo = 0
     cdef double ux, uy, length, width, extent, area, best = INFINITY, long_side, short_side
+    cdef double* hx = u + 2 * m
     side[0] = 0.0
     side[1] = 0.0
     if m == 2:
@@ -314,6 +346,10 @@ cdef void _min_area_box(const double* h, Py_ssize_t m, double* u, double* side) 
         length = sqrt(ux * ux + uy * uy)
         u[2 * i] = ux / length
         u[2 * i + 1] = uy / length
+    for i in range(2 * m):
+        hx[i] = h[i]
+    for i in range(8):
+        hx[2 * m + i] = h[i % (2 * m)]
     for i in range(m):
         ux = u[2 * i]
         uy = u[2 * i + 1]
@@ -326,9 +362,9 @@ cdef void _min_area_box(const double* h, Py_ssize_t m, double* u, double* side) 
                 if _dot(h + 2 * j, h, ux, uy) < _dot(h + 2 * lo, h, ux, uy):
                     lo = j
         else:  # as the edge turns counter-clockwise, so do its extreme vertices
-            far = _walk(h, m, far, h + 2 * i, -uy, ux)
-            hi = _walk(h, m, hi, h + 2 * i, ux, uy)
-            lo = _walk(h, m, lo, h + 2 * i, -ux, -uy)  # lowest: highest in direction -u
+            far = _walk(hx, m, far, h + 2 * i, -uy, ux)
+            hi = _walk(hx, m, hi, h + 2 * i, ux, uy)
+            lo = _walk(hx, m, lo, h + 2 * i, -ux, -uy)  # lowest: highest in direction -u
         width = _dot(h + 2 * far, h + 2 * i, -uy, ux)
         extent = _dot(h + 2 * hi, h + 2 * i, ux, uy) - _dot(h + 2 * lo, h + 2 * i, ux, uy)
         area = width * extent
@@ -350,27 +386,36 @@ cdef int _descriptors(
     const double* q, Py_ssize_t n, double* sorted_a, double* sorted_b, Py_ssize_t* runs,
     double* hull, double* work, double* out,
 ) noexcept nogil:
-    """Descriptors of the polygon q (n >= 2 points, no repeats) into out[0:10]; the status
-    (work: 4 n + 4 doubles)."""
+    """Descriptors of the polygon q (n >= 2 points, no repeats, vertex 0 again at n) into
+    out[0:10]; the status (work: 4 n + 8 doubles).
+
+    The sums over the vertices are plain sums in vertex order: the moments of a sliver (a
+    traced line that still encloses a little area) divide by its area, and the rounding of
+    another order would change them by parts in 1e9."""
     cdef Py_ssize_t i, j, m
     cdef double ac[3]
     cdef double side[2]
-    cdef double ex, ey, seg, total = 0.0, area, cx, cy, mx = 0.0, my = 0.0
+    cdef double ex, ey, total = 0.0, area, cx, cy, mx = 0.0, my = 0.0, vx = 0.0, vy = 0.0
     cdef double px, py, qx, qy, c, w, area2 = 0.0, sxx = 0.0, syy = 0.0, sxy = 0.0, scale
+    cdef double_r seg = sorted_b  # (before the sort)
     cdef double half_trace, root, major2, box_area, long_side, short_side
     cdef bint has_area
     cdef double* s
+    # perimeter: the segment lengths (one vectorised loop) into seg, then in one loop their
+    # sums, the curve centroid's and the vertex mean's (about which the area is summed)
     for i in range(n):
-        j = i + 1 if i + 1 < n else 0
-        ex = q[2 * j] - q[2 * i]
-        ey = q[2 * j + 1] - q[2 * i + 1]
-        seg = sqrt(ex * ex + ey * ey)
-        total += seg
-        mx += (q[2 * i] + q[2 * j]) * seg  # for the curve centroid
-        my += (q[2 * i + 1] + q[2 * j + 1]) * seg
+        ex = q[2 * i + 2] - q[2 * i]
+        ey = q[2 * i + 3] - q[2 * i + 1]
+        seg[i] = sqrt(ex * ex + ey * ey)
+    for i in range(n):
+        total += seg[i]
+        mx += (q[2 * i] + q[2 * i + 2]) * seg[i]  # for the curve centroid
+        my += (q[2 * i + 1] + q[2 * i + 3]) * seg[i]
+        vx += q[2 * i]
+        vy += q[2 * i + 1]
     out[5] = total
-    out[6] = seg  # the closing segment, last point to first
-    _area_centroid(q, n, ac)
+    out[6] = seg[n - 1]  # the closing segment, last point to first
+    _area_about(q, n, vx / n, vy / n, ac)
     area = fabs(ac[0])
     has_area = 4.0 * PI * area > NO_AREA_COMPACTNESS * total * total
     if has_area:
@@ -385,6 +430,8 @@ cdef int _descriptors(
     out[2] = cy
 
     # second moments about the centroid: of the filled polygon, or of the curve without area
+    # (edge i -> j written with the wrap, not via vertex 0 again at n: compiled so, the sums
+    # round as they did before, bit for bit)
     for i in range(n):
         j = i + 1 if i + 1 < n else 0
         px = q[2 * i] - cx
@@ -430,7 +477,7 @@ cdef int _descriptors(
         ey = hull[2 * j + 1] - hull[2 * i + 1]
         total += sqrt(ex * ex + ey * ey)
     out[7] = total
-    _min_area_box(hull, m, sorted_a, side)  # the sorted points are done with
+    _min_area_box(hull, m, work, side)  # the hull's work is done with
     long_side = side[0]
     short_side = side[1]
     if short_side > 1e-12 * long_side:
@@ -446,58 +493,273 @@ cdef int _descriptors(
 # ------------------------------------------------------------------------------ polar series
 
 
-cdef inline void _powers(double ux, double uy, int m, double* pr, double* pi) noexcept nogil:
-    """pr + i pi = (ux + i uy)^k for k = 0..m (four interleaved chains: short latency)."""
-    cdef int k
-    pr[0] = 1.0
-    pi[0] = 0.0
-    pr[1] = ux
-    pi[1] = uy
-    pr[2] = ux * ux - uy * uy
-    pi[2] = 2.0 * ux * uy
-    pr[3] = pr[2] * ux - pi[2] * uy
-    pi[3] = pr[2] * uy + pi[2] * ux
-    cdef double u4r = pr[2] * pr[2] - pi[2] * pi[2], u4i = 2.0 * pr[2] * pi[2]
-    for k in range(4, m + 1):
-        pr[k] = pr[k - 4] * u4r - pi[k - 4] * u4i
-        pi[k] = pr[k - 4] * u4i + pi[k - 4] * u4r
+cdef inline double _log(double x) noexcept nogil:
+    """Natural logarithm of a normal positive x, to 1 ulp, in branch-free code that vectorises
+    (fdlibm's e_log.c: x = 2^k (1 + f) with 1 + f in [sqrt(2)/2, sqrt(2)), log(1 + f) from
+    s = f / (2 + f) and a minimax polynomial in s^2). Not for 0, subnormals, inf or NaN."""
+    cdef uint64_t u
+    cdef int64_t hx, k
+    cdef double f, hfsq, s, z, w, t1, t2, dk
+    memcpy(&u, &x, 8)
+    hx = <int64_t>(u >> 32) + (0x3ff00000 - 0x3fe6a09e)
+    k = (hx >> 20) - 0x3ff
+    hx = (hx & 0x000fffff) + 0x3fe6a09e
+    u = (<uint64_t>hx << 32) | ((u << 32) >> 32)
+    memcpy(&f, &u, 8)
+    f -= 1.0
+    k += <int64_t>0x43380000 << 32  # k as a double: 1.5 * 2^52 + k, less 1.5 * 2^52 (exact;
+    memcpy(&dk, &k, 8)  # an integer add, where a conversion of int64 would need AVX-512)
+    dk -= 6755399441055744.0
+    hfsq = 0.5 * f * f
+    s = f / (2.0 + f)
+    z = s * s
+    w = z * z
+    t1 = w * (3.999999999940941908e-01 + w * (2.222219843214978396e-01
+                                              + w * 1.531383769920937332e-01))
+    t2 = z * (6.666666666666735130e-01 + w * (2.857142874366239149e-01
+                                              + w * (1.818357216161805012e-01
+                                                     + w * 1.479819860511658591e-01)))
+    return (
+        s * (hfsq + (t2 + t1)) + dk * 1.90821492927058770002e-10 - hfsq + f
+        + dk * 6.93147180369123816490e-01
+    )
 
 
-cdef inline void _differences(
-    cdouble_r p0r, cdouble_r p0i, cdouble_r p1r, cdouble_r p1i, cdouble_r inv_m, int m,
-    double_r dr, double_r di,
+cdef inline double _atan2(double y, double x) noexcept nogil:
+    """atan2(y, x) of finite y, x to 2 ulp, in branch-free code that vectorises (Cephes' atan:
+    the ratio of the smaller to the larger of |x|, |y| in [0, 1], above 0.66 reduced by pi/4,
+    then a rational function; pi/2 - a, pi - a and the sign of y place it)."""
+    cdef double ax = fabs(x), ay = fabs(y), t, z, pz, qz, a, b
+    cdef bint swap = ay > ax
+    cdef bint x_neg = x < 0.0
+    cdef double lo = ax if swap else ay
+    cdef double hi = ay if swap else ax
+    cdef bint big = lo > 0.66 * hi  # atan(lo / hi) = pi/4 + atan((lo - hi) / (lo + hi))
+    cdef double num_big = lo - hi, den_big = lo + hi
+    cdef double num = num_big if big else lo
+    cdef double den = den_big if big else hi
+    den = den if den > 0.0 else 1.0  # x = y = 0: 0
+    t = num / den
+    z = t * t
+    pz = (((-8.750608600031904122785e-1 * z - 1.615753718733365076637e1) * z
+           - 7.500855792314704667340e1) * z - 1.228866684490136173410e2) * z \
+        - 6.485021904942025371773e1
+    qz = ((((z + 2.485846490142306297962e1) * z + 1.650270098316988542046e2) * z
+           + 4.328810604912902668951e2) * z + 4.853903996359136964868e2) * z \
+        + 1.945506571482613964425e2
+    a = t + t * (z * pz / qz)
+    b = 0.78539816339744830962 + (a + 3.061616997868382943e-17)  # pi/4 in two parts
+    a = b if big else a
+    b = (1.57079632679489661923 - a) + 6.123233995736765886e-17  # pi/2 - a
+    a = b if swap else a
+    b = (3.14159265358979323846 - a) + 1.2246467991473531772e-16  # pi - a
+    a = b if x_neg else a
+    return copysign(a, y)
+
+
+cdef void _vertex_powers(
+    cdouble_r wx, cdouble_r wy, double_r pr, double_r pi, Py_ssize_t nv,
 ) noexcept nogil:
-    """dr + i di = D_k = (w1^k - w0^k) / (ik) for k = 1..m (one vectorised loop)."""
-    cdef int k
-    for k in range(1, m + 1):
-        dr[k] = (p1i[k] - p0i[k]) * inv_m[k]
-        di[k] = (p0r[k] - p1r[k]) * inv_m[k]
+    """pr + i pi *= wx + i wy at nv vertices (one vectorised loop)."""
+    cdef Py_ssize_t i
+    cdef double xr
+    for i in range(nv):
+        xr = pr[i] * wx[i] - pi[i] * wy[i]
+        pi[i] = pr[i] * wy[i] + pi[i] * wx[i]
+        pr[i] = xr
 
 
-cdef inline void _add_vertex(
-    cdouble_r pr, cdouble_r pi, int m, double h, double gr, double gi, double_r hr, double_r hi,
-    double_r s1, double_r s2, double_r s3, double_r s4,
+cdef void _edge_sums(
+    cdouble_r pr, cdouble_r pi, cdouble_r hh, cdouble_r ar, cdouble_r ai, Py_ssize_t ne,
+    double* out,
 ) noexcept nogil:
-    """Add a vertex's powers w^p = pr + i pi (p = 1..m) with the real weight h and the complex
-    weight g = gr + i gi: H_p += h w^p and the four real products of g and w^p, from which
-    sum g w^p = (s1 - s2) + i (s3 + s4) and sum g conj(w^p) = (s1 + s2) + i (s4 - s3)
-    (one vectorised loop)."""
-    cdef int p
-    for p in range(1, m + 1):
-        hr[p] += h * pr[p]
-        hi[p] += h * pi[p]
-        s1[p] += gr * pr[p]
-        s2[p] += gi * pi[p]
-        s3[p] += gr * pi[p]
-        s4[p] += gi * pr[p]
+    """Sums over the edges (ne: a multiple of LANES) of their weights h (hh) and a = ar + i ai
+    times the change of the power w^m (pr + i pi) along the edge, dw = w1^m - w0^m: out =
+    (sum h Re dw, sum h Im dw, and the four real products of a and dw, s1 = sum ar Re dw,
+    s2 = sum ai Im dw, s3 = sum ar Im dw, s4 = sum ai Re dw). One vectorised pass, LANES partial
+    sums per sum."""
+    cdef double a_hr[LANES]
+    cdef double a_hi[LANES]
+    cdef double a_s1[LANES]
+    cdef double a_s2[LANES]
+    cdef double a_s3[LANES]
+    cdef double a_s4[LANES]
+    cdef Py_ssize_t b, l, i
+    cdef double dr, di
+    for l in range(LANES):
+        a_hr[l] = 0.0
+        a_hi[l] = 0.0
+        a_s1[l] = 0.0
+        a_s2[l] = 0.0
+        a_s3[l] = 0.0
+        a_s4[l] = 0.0
+    for b in range(ne // LANES):
+        for l in range(LANES):
+            i = b * LANES + l
+            dr = pr[i + 1] - pr[i]
+            di = pi[i + 1] - pi[i]
+            a_hr[l] += hh[i] * dr
+            a_hi[l] += hh[i] * di
+            a_s1[l] += ar[i] * dr
+            a_s2[l] += ai[i] * di
+            a_s3[l] += ar[i] * di
+            a_s4[l] += ai[i] * dr
+    out[0] = _lanes_sum(a_hr)
+    out[1] = _lanes_sum(a_hi)
+    out[2] = _lanes_sum(a_s1)
+    out[3] = _lanes_sum(a_s2)
+    out[4] = _lanes_sum(a_s3)
+    out[5] = _lanes_sum(a_s4)
+
+
+cdef void _edge_recurrence(
+    cdouble_r pr, cdouble_r pi, cdouble_r gnx, cdouble_r gny, cdouble_r gd, double thresh,
+    double inv_p, double_r q0r, double_r q0i, double_r q1r, double_r q1i, Py_ssize_t ne,
+    double* out,
+) noexcept nogil:
+    """One step of the r recurrence on every edge (ne: a multiple of LANES): with the vertices'
+    powers w^p (pr, pi), D_p = (w1^p - w0^p) / (ip) and Q_{p+1} = 2 nu D_p - nu^2 Q_{p-1}
+    (q0: Q_{p-1}, q1: Q_p, shifted on); out = sum of d Q_{p+1} over the edges not skipped
+    (d > thresh). One vectorised pass, LANES partial sums."""
+    cdef double a_re[LANES]
+    cdef double a_im[LANES]
+    cdef Py_ssize_t b, l, i
+    cdef double dr, di, nx, ny, n2r, n2i, tr, ti, d
+    for l in range(LANES):
+        a_re[l] = 0.0
+        a_im[l] = 0.0
+    for b in range(ne // LANES):
+        for l in range(LANES):
+            i = b * LANES + l
+            dr = (pi[i + 1] - pi[i]) * inv_p
+            di = (pr[i] - pr[i + 1]) * inv_p
+            nx = gnx[i]
+            ny = gny[i]
+            d = gd[i]
+            n2r = nx * nx - ny * ny
+            n2i = 2.0 * nx * ny
+            tr = 2.0 * (nx * dr - ny * di) - (n2r * q0r[i] - n2i * q0i[i])
+            ti = 2.0 * (nx * di + ny * dr) - (n2r * q0i[i] + n2i * q0r[i])
+            q0r[i] = q1r[i]
+            q0i[i] = q1i[i]
+            q1r[i] = tr
+            q1i[i] = ti
+            tr = d * tr
+            ti = d * ti
+            a_re[l] += tr if d > thresh else 0.0
+            a_im[l] += ti if d > thresh else 0.0
+    out[0] = _lanes_sum(a_re)
+    out[1] = _lanes_sum(a_im)
+
+
+cdef void _edge_terms(
+    cdouble_r gx, cdouble_r gy, cdouble_r gir, cdouble_r lr, cdouble_r gnx, cdouble_r gny,
+    cdouble_r gd, double thresh, double_r hh, double_r ar, double_r ai, double_r q0r,
+    double_r q0i, double_r q1r, double_r q1i, Py_ssize_t ne, double* out,
+) noexcept nogil:
+    """Per edge (ne: a multiple of LANES; an edge with d <= thresh adds nothing): the angle
+    du it subtends, the r^-2 weights h = 1 / (2 d^2), a = nu^2 / (4 d^2) (into hh, ar, ai),
+    Q_0 = K_0 and Q_1 = nu K_1 of r (into q0, q1); out = (sum du, sum |du|, sum h du,
+    sum a du (re, im), sum d Q_0, sum d Q_1 (re, im)). One vectorised pass."""
+    cdef double a_net[LANES]
+    cdef double a_total[LANES]
+    cdef double a_h[LANES]
+    cdef double a_ar[LANES]
+    cdef double a_ai[LANES]
+    cdef double a_r0[LANES]
+    cdef double a_r1r[LANES]
+    cdef double a_r1i[LANES]
+    cdef Py_ssize_t b, l, i
+    cdef double x0, y0, x1, y1, ir0, ir1, nx, ny, d, c0, s0, c1, s1, du, h, are, aim, n2r, n2i
+    cdef double a0, b0, a1, b1, k0, k1
+    cdef bint ok
+    for l in range(LANES):
+        a_net[l] = 0.0
+        a_total[l] = 0.0
+        a_h[l] = 0.0
+        a_ar[l] = 0.0
+        a_ai[l] = 0.0
+        a_r0[l] = 0.0
+        a_r1r[l] = 0.0
+        a_r1i[l] = 0.0
+    for b in range(ne // LANES):
+        for l in range(LANES):
+            i = b * LANES + l
+            x0 = gx[i]
+            y0 = gy[i]
+            ir0 = gir[i]
+            x1 = gx[i + 1]
+            y1 = gy[i + 1]
+            ir1 = gir[i + 1]
+            nx = gnx[i]
+            ny = gny[i]
+            d = gd[i]
+            ok = d > thresh
+            c0 = d * ir0  # cos and sin of u at both ends
+            s0 = (y0 * nx - x0 * ny) * ir0
+            c1 = d * ir1
+            s1 = (y1 * nx - x1 * ny) * ir1
+            du = _atan2(s1 * c0 - c1 * s0, c1 * c0 + s1 * s0)  # each edge subtends less than pi
+            du = du if ok else 0.0
+            a_net[l] += du
+            a_total[l] += fabs(du)
+            n2r = nx * nx - ny * ny  # nu^2
+            n2i = 2.0 * nx * ny
+            h = 0.5 / (d * d)
+            h = h if ok else 0.0
+            are = 0.5 * h * n2r  # a = nu^2 / (4 d^2)
+            aim = 0.5 * h * n2i
+            are = are if ok else 0.0
+            aim = aim if ok else 0.0
+            hh[i] = h
+            ar[i] = are
+            ai[i] = aim
+            a_h[l] += h * du
+            a_ar[l] += are * du
+            a_ai[l] += aim * du
+            # K_0 = asinh(tan u1) - asinh(tan u0) = log(e1 / e0), e = (1 + sin u) / cos u, or
+            # cos u / (1 - sin u) without cancellation for sin u < 0. Where d > thresh, cos u =
+            # d / r > 1e-12 at both ends, so the ratio is within 1e-25..1e25: a normal number.
+            a0 = 1.0 + s0 if s0 >= 0.0 else c0
+            b0 = c0 if s0 >= 0.0 else 1.0 - s0
+            a1 = 1.0 + s1 if s1 >= 0.0 else c1
+            b1 = c1 if s1 >= 0.0 else 1.0 - s1
+            k0 = _log((a1 * b0) / (b1 * a0))
+            k1 = lr[i + 1] - lr[i]  # log(cos u0 / cos u1)
+            q0r[i] = k0  # Q_0
+            q0i[i] = 0.0
+            q1r[i] = nx * du - ny * k1  # Q_1 = nu K_1
+            q1i[i] = nx * k1 + ny * du
+            k0 = d * k0
+            a_r0[l] += k0 if ok else 0.0
+            k0 = d * q1r[i]
+            k1 = d * q1i[i]
+            a_r1r[l] += k0 if ok else 0.0
+            a_r1i[l] += k1 if ok else 0.0
+    out[0] = _lanes_sum(a_net)
+    out[1] = _lanes_sum(a_total)
+    out[2] = _lanes_sum(a_h)
+    out[3] = _lanes_sum(a_ar)
+    out[4] = _lanes_sum(a_ai)
+    out[5] = _lanes_sum(a_r0)
+    out[6] = _lanes_sum(a_r1r)
+    out[7] = _lanes_sum(a_r1i)
+
+
+cdef inline Py_ssize_t _series_work(Py_ssize_t n, int n_r, int n_rho) noexcept nogil:
+    """Doubles of work :func:`_series` needs for up to n vertices."""
+    cdef Py_ssize_t ne = _round_up(n)
+    cdef int big_m = n_r - 1 if n_r - 1 > n_rho + 2 else n_rho + 2
+    return 8 * (ne + LANES) + 10 * ne + 7 * _round_up(big_m + 3)
 
 
 cdef int _series(
-    const double* q, Py_ssize_t n, bint given, double cx, double cy, int n_r, int n_rho,
-    double* work, double* geo, double* r, double* rho, double* out,
+    cdouble_r q, Py_ssize_t n, bint given, double cx, double cy, int n_r, int n_rho,
+    double* work, double* r, double* rho, double* out,
 ) noexcept nogil:
     """Coefficients of r (harmonics 0..n_r) and r^-2 (0..n_rho) about the centre into r, rho
-    (interleaved re, im), centre, star-shapedness and winding into out[10:14]; the status.
+    (interleaved re, im), centre, star-shapedness and winding into out[10:14]; the status
+    (work: :func:`_series_work` doubles, 64-byte aligned).
 
     Per edge at distance d from the centre, foot point in direction phi (nu = e^{i phi}),
     u = theta - phi from u0 to u1: G_m = int e^{imu} du, K_n = int e^{inu} / cos u du (K_0 =
@@ -506,51 +768,60 @@ cdef int _series(
     w = e^{i theta} = nu e^{iu} at the vertices, D_m = e^{im phi} G_m = (w1^m - w0^m) / (im)
     for m != 0 (D_0 = u1 - u0 = du), so the powers are per vertex, shared by its two edges.
 
-    r^-2: an edge adds h D_n + conj(a) D_{n+2} + a D_{n-2}, h = 1 / (2 d^2), a = nu^2 / (4 d^2).
-    Summed by parts, sum over edges c (w1^m - w0^m) = sum over vertices (c_in - c_out) w^m
-    (c_in, c_out: of the edges ending and starting at the vertex; 0 for an edge skipped), so
-    with H_m = sum (h_in - h_out) w^m and A_m = sum (a_in - a_out) w^m the contour's sums are
-    sum h D_m = H_m / (im), sum a D_m = A_m / (im) and sum conj(a) D_m = conj(A_{-m}) / (im),
-    and only the D_0 terms (sum h du, sum a du) are per edge: one pass over a vertex's powers
-    (:func:`_add_vertex`) instead of D_m and three complex products per edge and harmonic.
+    r^-2: an edge adds h D_n + conj(a) D_{n+2} + a D_{n-2}, h = 1 / (2 d^2), a = nu^2 / (4 d^2)
+    (h = a = 0 for an edge skipped). Gathered per harmonic, with H_m = sum h (w1^m - w0^m) and
+    A_m = sum a (w1^m - w0^m) over the edges, the contour's sums are sum h D_m = H_m / (im),
+    sum a D_m = A_m / (im) and sum conj(a) D_m = conj(A_{-m}) / (im): per edge and harmonic
+    six real multiply-adds (:func:`_edge_sums`) instead of three complex products, and only
+    the D_0 terms (sum h du, sum a du) apart.
 
-    r: an edge adds d Q_n, Q_n = e^{in phi} K_n = 2 nu D_{n-1} - nu^2 Q_{n-2} (n_r is small: per
-    edge, with D_1..D_{n_r - 1}), Q_0 = K_0, Q_1 = nu K_1, Im K_1 = log(r1 / r0) from one log
-    per vertex.
+    r: an edge adds d Q_n, Q_n = e^{in phi} K_n = 2 nu D_{n-1} - nu^2 Q_{n-2}, Q_0 = K_0,
+    Q_1 = nu K_1, Im K_1 = log(r1 / r0) from one log per vertex.
+
+    Order of the work: passes over all vertices or all edges, each a vectorised loop (the
+    vertices about the centre; the edges' normals; the edges' du, weights, Q_0 and Q_1 with
+    :func:`_atan2` and :func:`_log`), then one pass per harmonic m = 1, 2, ...: every vertex's
+    w^m from w^{m-1} (:func:`_vertex_powers`), the edges' sums H_m and A_m and, for r, every
+    edge's D_m and Q_{m+1} (:func:`_edge_recurrence`). Each sum runs in LANES partial sums.
     """
-    cdef Py_ssize_t i, j
+    cdef Py_ssize_t i, ne = _round_up(n), nv = ne + LANES
     cdef int k, p, big_m = n_r - 1 if n_r - 1 > n_rho + 2 else n_rho + 2
-    cdef Py_ssize_t w = big_m + 3  # >= 4: _powers writes 0..3 at least
-    cdef double* p0r = work  # powers of w at the edge's first vertex
-    cdef double* p0i = work + w
-    cdef double* p1r = work + 2 * w  # and at its second
-    cdef double* p1i = work + 3 * w
-    cdef double* dr = work + 4 * w  # D_m at index m + 2, m = 0..n_r - 1 (for r)
-    cdef double* di = work + 5 * w
-    cdef double* inv_m = work + 6 * w
-    cdef double* hr = work + 7 * w  # vertex sums of r^-2 (_add_vertex), index p = 1..n_rho + 2
-    cdef double* hi = work + 8 * w
-    cdef double* s1 = work + 9 * w
-    cdef double* s2 = work + 10 * w
-    cdef double* s3 = work + 11 * w
-    cdef double* s4 = work + 12 * w
-    cdef double_r gx = geo  # per vertex: position about the centre (vertex 0 again at n), 1 / r
-    cdef double_r gy = geo + n + 1
-    cdef double_r gir = geo + 2 * n + 2
-    cdef double_r gnx = geo + 3 * n + 2  # per edge: unit normal nu, distance d
-    cdef double_r gny = geo + 4 * n + 2
-    cdef double_r gd = geo + 5 * n + 2
-    cdef double* swap
+    cdef Py_ssize_t nc = _round_up(big_m + 3)
+    # per vertex (vertex 0 again at n and in the padding up to nv): position about the centre,
+    # 1 / r, log r, w = e^{i theta}, its powers
+    cdef double_r gx = work
+    cdef double_r gy = work + nv
+    cdef double_r gir = work + 2 * nv
+    cdef double_r lr = work + 3 * nv
+    cdef double_r wx = work + 4 * nv
+    cdef double_r wy = work + 5 * nv
+    cdef double_r pr = work + 6 * nv
+    cdef double_r pi = work + 7 * nv
+    # per edge (d = 0 from n on): unit normal nu, distance d, r^-2 weights, Q_{m-1} and Q_m
+    cdef double_r gnx = work + 8 * nv
+    cdef double_r gny = gnx + ne
+    cdef double_r gd = gnx + 2 * ne
+    cdef double_r hh = gnx + 3 * ne
+    cdef double_r ar = gnx + 4 * ne
+    cdef double_r ai = gnx + 5 * ne
+    cdef double_r q0r = gnx + 6 * ne
+    cdef double_r q0i = gnx + 7 * ne
+    cdef double_r q1r = gnx + 8 * ne
+    cdef double_r q1i = gnx + 9 * ne
+    # per harmonic: 1 / m and the edge sums of r^-2 (H_m, A_m), index m = 1..n_rho + 2
+    cdef double* inv_m = gnx + 10 * ne
+    cdef double* hr = inv_m + nc
+    cdef double* hi = inv_m + 2 * nc
+    cdef double* s1 = inv_m + 3 * nc
+    cdef double* s2 = inv_m + 4 * nc
+    cdef double* s3 = inv_m + 5 * nc
+    cdef double* s4 = inv_m + 6 * nc
     cdef double ac[3]
-    cdef double x0, y0, x1, y1, ir0, ir1, lr0 = 0.0, lr1 = 0.0, ux0, uy0, ex, ey, inv_len
-    cdef double nx, ny, d, scale2 = 0.0, thresh, c0, s0, c1, s1_, du, net = 0.0, total = 0.0
-    cdef double a0, b0, a1, b1, k0, k1, qpr, qpi, qcr, qci, tr, ti, n2r, n2i, hh, ar, ai
-    cdef double h_du = 0.0, ar_du = 0.0, ai_du = 0.0, h_prev = 0.0, ar_prev = 0.0, ai_prev = 0.0
-    cdef double h_first = 0.0, ar_first = 0.0, ai_first = 0.0, winding, norm
-    for k in range(2 * (n_r + 1)):
-        r[k] = 0.0
-    for k in range(6 * w):
-        hr[k] = 0.0
+    cdef double sums[8]
+    cdef double x0, y0, r2, ir, ex, ey, inv_len, nx, ny, d, scale2 = 0.0, thresh
+    cdef double net, total, h_du, ar_du, ai_du, winding, norm, tr, ti
+    for k in range(7 * nc):
+        inv_m[k] = 0.0
     for k in range(1, big_m + 1):
         inv_m[k] = 1.0 / k
     if not given:
@@ -563,21 +834,39 @@ cdef int _series(
         return S_SERIES_BAD_CENTRE
     out[10] = cx
     out[11] = cy
-    # vertices about the centre and 1 / r, then the edges' unit normals towards the edge and
-    # distances: two branch-free loops (square roots and divisions vectorised) before the
-    # edge loop with its atan2 and logs
+
+    # vertices about the centre, 1 / r and w (0 at the centre itself: its edges are skipped)
     for i in range(n):
         x0 = q[2 * i] - cx
         y0 = q[2 * i + 1] - cy
+        r2 = x0 * x0 + y0 * y0
+        ir = 1.0 / sqrt(r2)
         gx[i] = x0
         gy[i] = y0
-        gir[i] = 1.0 / sqrt(x0 * x0 + y0 * y0)
+        gir[i] = ir
+        ex = x0 * ir
+        ey = y0 * ir
+        wx[i] = ex if r2 > 0.0 else 0.0
+        wy[i] = ey if r2 > 0.0 else 0.0
+    for i in range(n, nv):
+        gx[i] = gx[0]
+        gy[i] = gy[0]
+        gir[i] = gir[0]
+        wx[i] = wx[0]
+        wy[i] = wy[0]
     for i in range(n):  # (a max does not vectorise)
-        d = gx[i] * gx[i] + gy[i] * gy[i]
-        scale2 = d if d > scale2 else scale2
+        r2 = gx[i] * gx[i] + gy[i] * gy[i]
+        scale2 = r2 if r2 > scale2 else scale2
     thresh = 1e-12 * sqrt(scale2)  # edges on a line through the centre add nothing
-    gx[n] = gx[0]
-    gy[n] = gy[0]
+    if n_r >= 0:
+        # log r = -log(1 / r): 1 / r is a normal number (r^2 a finite double); an infinite
+        # 1 / r (a vertex on the centre) gives a wrong log, read only by skipped edges
+        for i in range(nv):
+            lr[i] = -_log(gir[i])
+    else:
+        for i in range(nv):
+            lr[i] = 0.0
+    # the edges' unit normals towards the edge (nu) and distances
     for i in range(n):
         ex = gx[i + 1] - gx[i]
         ey = gy[i + 1] - gy[i]
@@ -588,99 +877,39 @@ cdef int _series(
         gnx[i] = -nx if d < 0.0 else nx  # nu = (nx, ny) points from the centre to the edge
         gny[i] = -ny if d < 0.0 else ny
         gd[i] = -d if d < 0.0 else d
+    for i in range(n, ne):
+        gnx[i] = 0.0
+        gny[i] = 0.0
+        gd[i] = 0.0
 
-    x0 = gx[0]
-    y0 = gy[0]
-    ir0 = gir[0]
+    _edge_terms(gx, gy, gir, lr, gnx, gny, gd, thresh, hh, ar, ai, q0r, q0i, q1r, q1i, ne, sums)
+    net = sums[0]
+    total = sums[1]
+    h_du = sums[2]
+    ar_du = sums[3]
+    ai_du = sums[4]
     if n_r >= 0:
-        lr0 = -log(ir0)
-    ux0 = x0 * ir0
-    uy0 = y0 * ir0
-    _powers(ux0, uy0, big_m, p0r, p0i)
-    for i in range(n):
-        j = i + 1 if i + 1 < n else 0
-        x1 = gx[j]
-        y1 = gy[j]
-        ir1 = gir[j]
-        if n_r >= 0:
-            lr1 = -log(ir1)
-        _powers(x1 * ir1, y1 * ir1, big_m, p1r, p1i)
-        nx = gnx[i]
-        ny = gny[i]
-        d = gd[i]
-        hh = 0.0
-        ar = 0.0
-        ai = 0.0
-        if d > thresh:
-            c0 = d * ir0  # cos and sin of u at both ends
-            s0 = (y0 * nx - x0 * ny) * ir0
-            c1 = d * ir1
-            s1_ = (y1 * nx - x1 * ny) * ir1
-            du = atan2(s1_ * c0 - c1 * s0, c1 * c0 + s1_ * s0)  # each edge subtends less than pi
-            net += du
-            total += fabs(du)
-            n2r = nx * nx - ny * ny  # nu^2
-            n2i = 2.0 * nx * ny
-            hh = 0.5 / (d * d)
-            ar = 0.5 * hh * n2r  # nu^2 / (4 d^2)
-            ai = 0.5 * hh * n2i
-            h_du += hh * du
-            ar_du += ar * du
-            ai_du += ai * du
-            if n_r >= 0:
-                # K_0 = asinh(tan u1) - asinh(tan u0) = log(e1 / e0), e = (1 + sin u) / cos u,
-                # or cos u / (1 - sin u) without cancellation for sin u < 0
-                a0 = 1.0 + s0 if s0 >= 0.0 else c0
-                b0 = c0 if s0 >= 0.0 else 1.0 - s0
-                a1 = 1.0 + s1_ if s1_ >= 0.0 else c1
-                b1 = c1 if s1_ >= 0.0 else 1.0 - s1_
-                k0 = log((a1 * b0) / (b1 * a0))
-                k1 = lr1 - lr0  # log(cos u0 / cos u1)
-                _differences(p0r, p0i, p1r, p1i, inv_m, n_r - 1, dr + 2, di + 2)
-                qpr = k0  # Q_0
-                qpi = 0.0
-                qcr = nx * du - ny * k1  # Q_1 = nu K_1
-                qci = nx * k1 + ny * du
-                for k in range(n_r + 1):
-                    if k >= 2:
-                        tr = 2.0 * (nx * dr[k + 1] - ny * di[k + 1]) - (n2r * qpr - n2i * qpi)
-                        ti = 2.0 * (nx * di[k + 1] + ny * dr[k + 1]) - (n2r * qpi + n2i * qpr)
-                        qpr = qcr
-                        qpi = qci
-                        qcr = tr
-                        qci = ti
-                    r[2 * k] += d * (qpr if k == 0 else qcr)
-                    r[2 * k + 1] += d * (qpi if k == 0 else qci)
-        if i == 0:  # vertex 0 last, when its incoming edge is known
-            h_first = hh
-            ar_first = ar
-            ai_first = ai
-        elif n_rho >= 0 and (h_prev != hh or ar_prev != ar or ai_prev != ai):
-            # vertex i: in edge i - 1, out edge i (both skipped: nothing, the vertex may be the
-            # centre itself)
-            _add_vertex(
-                p0r, p0i, n_rho + 2, h_prev - hh, ar_prev - ar, ai_prev - ai, hr, hi, s1, s2,
-                s3, s4,
-            )
-        h_prev = hh
-        ar_prev = ar
-        ai_prev = ai
-        swap = p0r
-        p0r = p1r
-        p1r = swap
-        swap = p0i
-        p0i = p1i
-        p1i = swap
-        x0 = x1
-        y0 = y1
-        ir0 = ir1
-        lr0 = lr1
-    if n_rho >= 0 and (h_prev != h_first or ar_prev != ar_first or ai_prev != ai_first):
-        _powers(ux0, uy0, big_m, p0r, p0i)
-        _add_vertex(
-            p0r, p0i, n_rho + 2, h_prev - h_first, ar_prev - ar_first, ai_prev - ai_first, hr,
-            hi, s1, s2, s3, s4,
-        )
+        r[0] = sums[5]
+        r[1] = 0.0
+    if n_r >= 1:
+        r[2] = sums[6]
+        r[3] = sums[7]
+    for i in range(nv):
+        pr[i] = 1.0
+        pi[i] = 0.0
+    for p in range(1, big_m + 1):  # w^p at every vertex; H_p and A_p; Q_{p+1} of r
+        _vertex_powers(wx, wy, pr, pi, nv)
+        if n_rho >= 0 and p <= n_rho + 2:
+            _edge_sums(pr, pi, hh, ar, ai, ne, sums)
+            hr[p] = sums[0]
+            hi[p] = sums[1]
+            s1[p] = sums[2]
+            s2[p] = sums[3]
+            s3[p] = sums[4]
+            s4[p] = sums[5]
+        if p <= n_r - 1:
+            _edge_recurrence(pr, pi, gnx, gny, gd, thresh, inv_m[p], q0r, q0i, q1r, q1i, ne,
+                             r + 2 * (p + 1))
 
     winding = nearbyint(net / (2.0 * PI))
     out[12] = fabs(net) / total if total > 0.0 else 0.0
@@ -736,12 +965,12 @@ cdef void _contour(
     int n_r, int n_rho, double* r, double* rho, double* out, signed char* status,
     signed char* series_status,
 ) noexcept nogil:
-    """Everything about one contour (buf: 8 max_n + 2 doubles, then the work of the hull,
-    4 max_n + 4, and of the series, 13 (big_m + 3), sharing their place)."""
-    cdef Py_ssize_t i, n
+    """Everything about one contour (buf: 64-byte aligned, :func:`_buffer_size` doubles: the
+    points without repeats, then the work of the descriptors or of the series)."""
+    cdef Py_ssize_t i, n, part = _round_up(2 * max_n + 2)
     cdef int nh = n_r if n_r > n_rho else n_rho
     cdef double* q = buf
-    cdef double* work = buf + 8 * max_n + 2
+    cdef double* work = buf + part
     for i in range(NV):
         out[i] = NAN
     for i in range(2 * (n_r + 1)):
@@ -757,19 +986,29 @@ cdef void _contour(
             status[0] = S_NON_FINITE
             return
     n = _dedup(src, n_raw, True, q)
+    if n > 0:  # vertex 0 again after the last: the closing edge without a wrap
+        q[2 * n] = q[0]
+        q[2 * n + 1] = q[1]
     if n < 2:
         status[0] = S_ONE_POINT
     else:
         status[0] = _descriptors(
-            q, n, buf + 2 * max_n, buf + 4 * max_n, runs, buf + 6 * max_n, work, out
+            q, n, work, work + part, runs, work + 2 * part, work + 3 * part, out
         )
         if status[0] != S_OK:
             for i in range(NV):
                 out[i] = NAN
     if want_series and nh >= 0 and not (isfinite(max_elongation) and out[8] >= max_elongation):
-        series_status[0] = _series(
-            q, n, given, cx, cy, n_r, n_rho, work, buf + 2 * max_n, r, rho, out
-        )
+        series_status[0] = _series(q, n, given, cx, cy, n_r, n_rho, work, r, rho, out)
+
+
+cdef Py_ssize_t _buffer_size(Py_ssize_t max_n, int n_r, int n_rho) noexcept nogil:
+    """Doubles of work :func:`_contour` needs for contours of up to max_n points: the points
+    (with vertex 0 again after the last), then the work of the descriptors (two sorted copies,
+    the hull, its work: three parts like the points' and 4 max_n + 8) or the series'."""
+    cdef Py_ssize_t part = _round_up(2 * max_n + 2)
+    cdef Py_ssize_t series = _series_work(max_n, n_r, n_rho), descriptors = 3 * part + 4 * max_n + 8
+    return part + (series if series > descriptors else descriptors)
 
 
 def measure_contours(
@@ -830,18 +1069,19 @@ def measure_contours(
     cdef double* rp = &r[0, 0] if r.shape[0] > 0 and r.shape[1] > 0 else NULL
     cdef double* rhop = &rho[0, 0] if rho.shape[0] > 0 and rho.shape[1] > 0 else NULL
     cdef Py_ssize_t r_stride = r.shape[1], rho_stride = rho.shape[1]
-    cdef int big_m = n_r - 1 if n_r - 1 > n_rho + 2 else n_rho + 2
+    cdef double* mem
     cdef double* buf
     cdef Py_ssize_t* runs
     if k_total == 0:
         return status_arr, series_arr, values_arr, r_arr, rho_arr
-    n_buf = 8 * max_n + 2 + max(4 * max_n + 4, 13 * (big_m + 3)) + 8
+    n_buf = _buffer_size(max_n, n_r, n_rho) + LANES  # + LANES: room to align to 64 bytes
     nt = max(num_threads, 1) if k_total >= 16 else 1
     with nogil, parallel(num_threads=nt):
-        buf = <double*> malloc(n_buf * sizeof(double))
+        mem = <double*> malloc(n_buf * sizeof(double))
+        buf = <double*> ((<uintptr_t> mem + 63) & ~(<uintptr_t> 63))
         runs = <Py_ssize_t*> malloc((max_n + 2) * sizeof(Py_ssize_t))
         for k in prange(k_total, schedule="dynamic", chunksize=4):
-            if buf == NULL or runs == NULL:
+            if mem == NULL or runs == NULL:
                 status[k] = -1
             else:
                 _contour(
@@ -852,7 +1092,7 @@ def measure_contours(
                     rhop + k * rho_stride if rhop != NULL else NULL,
                     &values[k, 0], &status[k], &series[k],
                 )
-        free(buf)
+        free(mem)
         free(runs)
     if (status_arr < 0).any():
         raise MemoryError("measure_contours: no memory for the per-thread buffers")
@@ -886,7 +1126,7 @@ def drop_repeated(const double[:, ::1] points, const int64_t[::1] offsets, bint 
 def area_centroids(const double[:, ::1] points, const int64_t[::1] offsets):
     """Absolute area and area centroid (the vertex mean without area) of K polygons, each with
     at least one vertex; returns (area (K,), centroid (K, 2))."""
-    cdef Py_ssize_t k_total = offsets.shape[0] - 1, k
+    cdef Py_ssize_t k_total = offsets.shape[0] - 1, k, n, i, max_n = 0
     cdef double ac[3]
     if k_total < 0 or points.shape[1] != 2 or offsets[0] != 0 \
             or offsets[k_total] != points.shape[0]:
@@ -898,9 +1138,17 @@ def area_centroids(const double[:, ::1] points, const int64_t[::1] offsets):
     for k in range(k_total):
         if offsets[k + 1] <= offsets[k]:
             raise ValueError("area_centroids: every polygon needs a vertex")
+        max_n = max(max_n, offsets[k + 1] - offsets[k])
+    # one polygon at a time, vertex 0 again after the last
+    cdef double[::1] closed = np.empty(2 * max_n + 2, np.float64)
     with nogil:
         for k in range(k_total):
-            _area_centroid(&points[0, 0] + 2 * offsets[k], offsets[k + 1] - offsets[k], ac)
+            n = offsets[k + 1] - offsets[k]
+            for i in range(2 * n):
+                closed[i] = points[offsets[k] + i // 2, i % 2]
+            closed[2 * n] = closed[0]
+            closed[2 * n + 1] = closed[1]
+            _area_centroid(&closed[0], n, ac)
             area[k] = fabs(ac[0])
             centroid[k, 0] = ac[1]
             centroid[k, 1] = ac[2]
@@ -932,7 +1180,7 @@ def min_area_box(const double[:, ::1] points):
     hull = convex_hull(points)
     cdef const double[:, ::1] h = hull
     m = h.shape[0]
-    u = np.empty(2 * m, np.float64)
+    u = np.empty(4 * m + 8, np.float64)
     cdef double[::1] uv = u
     _min_area_box(&h[0, 0], m, &uv[0], side)
     return side[0], side[1]
