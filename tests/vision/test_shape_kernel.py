@@ -330,3 +330,33 @@ def test_contours_touching_the_image_border() -> None:
         pts, off, d_alpha=np.full(len(contours), 10.0), centroid_inside=np.ones(len(contours))
     )
     assert "rectangle" in labels
+
+
+def test_hull_values_do_not_depend_on_where_the_contour_starts() -> None:
+    """The convex perimeter and the box (elongation) come from the sorted points only: the same
+    bits for every start and both directions of a contour (the sort is handed the points from
+    the contour's last run on, which changes with the start)."""
+    gen = np.random.default_rng(11)
+    mask = np.zeros((80, 80), np.uint8)
+    cv2.ellipse(mask, (40, 40), (30, 12), 35, 0, 360, 255, -1)
+    pixel = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)[0][0][:, 0, :]
+    for c in (pixel.astype(np.float64), _star_polygon(gen, 40)):
+        variants = [np.roll(c, s, axis=0) for s in range(0, len(c), 3)]
+        variants += [v[::-1].copy() for v in variants]
+        measured = measure_contours(*_concat(variants))
+        for name in ("convex_perimeter", "elongation"):
+            column = measured.values[name]
+            assert (column == column[0]).all(), name
+        assert min_area_box(c) == pytest.approx(_box_reference(c), rel=1e-12)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_a_non_finite_coordinate_anywhere_is_found(bad: float) -> None:
+    square = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], float)
+    contours = []
+    for i in range(8):
+        c = square.copy()
+        c.flat[i] = bad
+        contours.append(c)
+    measured = measure_contours(*_concat([*contours, square]))
+    assert measured.status.tolist() == [kernel.NON_FINITE] * 8 + [kernel.OK]

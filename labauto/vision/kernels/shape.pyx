@@ -5,13 +5,16 @@
 See :mod:`labauto.vision.descriptors` and :mod:`labauto.vision.harmonics` for the definitions
 and the choices made; this is their inner loop. :func:`measure_contours` takes K contours
 concatenated (``points[offsets[k]:offsets[k + 1]]``) and, per contour (contours shared among
-threads), drops repeated points, then computes
+threads), checks the coordinates are finite (one vectorised pass), drops repeated points,
+then computes
 
 * the area and area centroid of the polygon (about the vertex mean), the curve centroid when
   there is no area, the semi-axes from the second moments, the perimeter;
 * the convex hull (monotone chain after a natural merge sort: an ordered contour is made of a
-  few x-monotone runs) and the minimum-area box around it (rotating calipers, each caliper's
-  next five heights at once);
+  few x-monotone runs, and the sort is handed the points starting at the last run, which on a
+  closed contour usually goes on into the first) and the minimum-area box around it (rotating
+  calipers, each caliper's next four heights and three steps at once, :func:`_rise3`: with
+  AVX2 in one vector product and one comparison); the hull's perimeter from the box's edges;
 * optionally the Fourier coefficients of ``r`` and ``r^-2`` about the centre, exact per edge
   (see :func:`_series`), harmonic by harmonic in vectorised passes over all vertices and edges;
   the sums over the edges run in LANES partial sums (added up in a fixed order), and atan2 and
@@ -97,6 +100,17 @@ cdef Py_ssize_t _dedup(const double* src, Py_ssize_t n, bint closed, double* dst
     return m
 
 
+cdef bint _all_finite(const double* x, Py_ssize_t n) noexcept nogil:
+    """Whether the n doubles x are all finite: no exponent field all ones (inf, NaN), as an
+    integer OR over all of them (one vectorised loop, no early exit)."""
+    cdef Py_ssize_t i
+    cdef uint64_t bits, bad = 0
+    for i in range(n):
+        memcpy(&bits, x + i, 8)
+        bad |= ((bits >> 52) & 0x7ff) == 0x7ff
+    return bad == 0
+
+
 cdef inline double _lanes_sum(const double* acc) noexcept nogil:
     """Sum of the LANES partial sums of a reduction, in a fixed order."""
     return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]))
@@ -141,6 +155,21 @@ cdef void _area_centroid(const double* p, Py_ssize_t n, double* out) noexcept no
 
 cdef inline bint _less(const double* a, const double* b) noexcept nogil:
     return a[0] < b[0] or (a[0] == b[0] and a[1] < b[1])
+
+
+cdef Py_ssize_t _last_run(const double* a, Py_ssize_t n) noexcept nogil:
+    """Start of the last run of the n (x, y) pairs a as :func:`_sort_points` finds runs
+    (non-decreasing or strictly decreasing), found backwards from the end."""
+    cdef Py_ssize_t i = n - 1
+    if n < 2:
+        return 0
+    if _less(a + 2 * i, a + 2 * i - 2):
+        while i > 0 and _less(a + 2 * i, a + 2 * i - 2):
+            i -= 1
+    else:
+        while i > 0 and not _less(a + 2 * i, a + 2 * i - 2):
+            i -= 1
+    return i
 
 
 cdef double* _sort_points(double* a, double* tmp, Py_ssize_t n, Py_ssize_t* runs) noexcept nogil:
@@ -280,62 +309,102 @@ cdef inline double _dot(const double* p, const double* o, double ux, double uy) 
     return (p[0] - o[0]) * ux + (p[1] - o[1]) * uy
 
 
+cdef extern from *:
+    """
+    #if defined(__AVX2__)
+    #include <immintrin.h>
+    #endif
+    /* The heights d_k = (p[0] - o[0]) ux + (p[1] - o[1]) uy of the four points p = h + 2 k
+       (k = 0..3, as _dot rounds them: the same products and sum on every path); returns how
+       many of the steps 0 -> 1, 1 -> 2, 2 -> 3 in a row do not go down (0..3) and d_3 in *d3.
+       AVX2: the four heights in two vector products and one pairwise add, the three
+       comparisons in one; elsewhere plain code. */
+    static inline int labauto_rise3(const double* h, const double* o, double ux, double uy,
+                                    double* d3) {
+    #if defined(__AVX2__)
+        const __m256d o2 = _mm256_setr_pd(o[0], o[1], o[0], o[1]);
+        const __m256d u2 = _mm256_setr_pd(ux, uy, ux, uy);
+        const __m256d a = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(h), o2), u2);
+        const __m256d b = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(h + 4), o2), u2);
+        /* hadd: (d0, d2, d1, d3); e = (d0, d1, d2, d3); f = (d1, d2, d3, d3) */
+        const __m256d e = _mm256_permute4x64_pd(_mm256_hadd_pd(a, b), 0xD8);
+        const __m256d f = _mm256_permute4x64_pd(e, 0xF9);
+        const int down = _mm256_movemask_pd(_mm256_cmp_pd(f, e, _CMP_LT_OQ));
+        *d3 = _mm256_cvtsd_f64(_mm256_permute4x64_pd(e, 3));
+        return __builtin_ctz(down | 8);
+    #else
+        const double d0 = (h[0] - o[0]) * ux + (h[1] - o[1]) * uy;
+        const double d1 = (h[2] - o[0]) * ux + (h[3] - o[1]) * uy;
+        const double d2 = (h[4] - o[0]) * ux + (h[5] - o[1]) * uy;
+        const double e3 = (h[6] - o[0]) * ux + (h[7] - o[1]) * uy;
+        const int s1 = !(d1 < d0), s2 = s1 & !(d2 < d1), s3 = s2 & !(e3 < d2);
+        *d3 = e3;
+        return s1 + s2 + s3;
+    #endif
+    }
+    """
+    int _rise3 "labauto_rise3"(
+        const double* h, const double* o, double ux, double uy, double* d3
+    ) noexcept nogil
+
+
 cdef inline Py_ssize_t _walk(
     const double* h, Py_ssize_t m, Py_ssize_t j, const double* o, double ux, double uy,
 ) noexcept nogil:
     """From vertex j, the first vertex along the hull whose successor is lower in direction
-    (ux, uy) (heights about o; at most m steps; h holds vertices 0, 1, 2, 3 again after m - 1).
+    (ux, uy) (heights about o; at most m steps; h holds vertices 0, 1, 2 again after m - 1).
 
     Between two hull edges an extreme vertex moves 0, 1, 2, 3 or more steps about 45, 35, 13,
-    4 and 3 % of the time (short and long hull edges alternate): the heights of j..j + 4 are
-    computed at once (independent loads) and the steps counted without branches; a fifth step
-    and on goes by a loop."""
-    cdef Py_ssize_t jn, steps
-    cdef double d0, d1, d2, d3, d4, nxt
-    cdef bint s1, s2, s3, s4, take
-    d0 = _dot(h + 2 * j, o, ux, uy)
-    d1 = _dot(h + 2 * j + 2, o, ux, uy)
-    d2 = _dot(h + 2 * j + 4, o, ux, uy)
-    d3 = _dot(h + 2 * j + 6, o, ux, uy)
-    d4 = _dot(h + 2 * j + 8, o, ux, uy)
-    s1 = not (d1 < d0)
-    s2 = s1 & (not (d2 < d1))
-    s3 = s2 & (not (d3 < d2))
-    s4 = s3 & (not (d4 < d3))
-    steps = s1 + s2 + s3 + s4
-    steps = m if steps > m else steps  # (a triangle: once round at most)
+    4 and 3 % of the time (short and long hull edges alternate): the heights of j..j + 3 and
+    the first three steps at once, without branches (:func:`_rise3`); a fourth step and on
+    goes by a loop (entered 7 % of the time)."""
+    cdef Py_ssize_t jn, steps, rise
+    cdef double d3, nxt
+    cdef bint take
+    rise = _rise3(h + 2 * j, o, ux, uy, &d3)
+    steps = m if rise > m else rise  # (a triangle: once round at most)
     j += steps
     j = j - m if j >= m else j
-    take = s4
+    take = rise == 3
     while take and steps < m:
         jn = j + 1 if j + 1 < m else 0
         nxt = _dot(h + 2 * jn, o, ux, uy)
-        take = not (nxt < d4)
+        take = not (nxt < d3)
         j = jn if take else j
-        d4 = nxt if take else d4
+        d3 = nxt if take else d3
         steps += 1
     return j
 
 
-cdef void _min_area_box(const double* h, Py_ssize_t m, double* u, double* side) noexcept nogil:
+cdef double _min_area_box(
+    const double* h, Py_ssize_t m, double* u, double* side,
+) noexcept nogil:
     """Long and short side of the minimum-area rectangle around the convex polygon h (m vertices,
     counter-clockwise): rotating calipers, one side of the box on each hull edge in turn; of
-    boxes with the same area (to 1e-12) the least elongated.
+    boxes with the same area (to 1e-12) the least elongated. Returns the polygon's perimeter.
 
-    Two passes: the unit directions of all edges into u (one loop, square roots and divisions
-    vectorised), then the calipers (:func:`_walk`, on a copy of h that goes on for 4 vertices
-    past the last; u: 4 m + 8 doubles)."""
+    Two passes: the edges' lengths and unit directions into u (one loop, square roots and
+    divisions vectorised; the perimeter is the lengths' sum in edge order), then the calipers
+    (:func:`_walk`, on a copy of h that goes on for 4 vertices past the last; u: 5 m + 8
+    doubles)."""
     cdef Py_ssize_t i, j, far = 0, hi = 0, lo = 0
     cdef double ux, uy, length, width, extent, area, best = INFINITY, long_side, short_side
+    cdef double d_far, d_hi, d_lo, d, perimeter = 0.0
     cdef double* hx = u + 2 * m
+    cdef double* lengths = u + 4 * m + 8
     side[0] = 0.0
     side[1] = 0.0
-    if m == 2:
-        ux = h[2] - h[0]
-        uy = h[3] - h[1]
-        side[0] = sqrt(ux * ux + uy * uy)
-    if m < 3:
-        return
+    if m < 3:  # a point (0) or a segment (twice its length)
+        for i in range(m):
+            j = i + 1 if i + 1 < m else 0
+            ux = h[2 * j] - h[2 * i]
+            uy = h[2 * j + 1] - h[2 * i + 1]
+            perimeter += sqrt(ux * ux + uy * uy)
+        if m == 2:
+            ux = h[2] - h[0]
+            uy = h[3] - h[1]
+            side[0] = sqrt(ux * ux + uy * uy)
+        return perimeter
     for i in range(2 * m - 2):  # u[2 i], u[2 i + 1]: edge i -> i + 1, the last one below
         u[i] = h[i + 2] - h[i]
     u[2 * m - 2] = h[0] - h[2 * m - 2]
@@ -344,24 +413,34 @@ cdef void _min_area_box(const double* h, Py_ssize_t m, double* u, double* side) 
         ux = u[2 * i]
         uy = u[2 * i + 1]
         length = sqrt(ux * ux + uy * uy)
+        lengths[i] = length
         u[2 * i] = ux / length
         u[2 * i + 1] = uy / length
+    for i in range(m):
+        perimeter += lengths[i]
     for i in range(2 * m):
         hx[i] = h[i]
     for i in range(8):
         hx[2 * m + i] = h[i % (2 * m)]
+    # the extreme vertices of the first edge by a full scan (the first of equal heights)
+    ux = u[0]
+    uy = u[1]
+    d_far = _dot(h, h, -uy, ux)
+    d_hi = _dot(h, h, ux, uy)
+    d_lo = d_hi
+    for j in range(1, m):
+        d = _dot(h + 2 * j, h, -uy, ux)
+        far = j if d > d_far else far
+        d_far = d if d > d_far else d_far
+        d = _dot(h + 2 * j, h, ux, uy)
+        hi = j if d > d_hi else hi
+        d_hi = d if d > d_hi else d_hi
+        lo = j if d < d_lo else lo
+        d_lo = d if d < d_lo else d_lo
     for i in range(m):
         ux = u[2 * i]
         uy = u[2 * i + 1]
-        if i == 0:  # the extreme vertices of the first edge by a full scan
-            for j in range(1, m):
-                if _dot(h + 2 * j, h, -uy, ux) > _dot(h + 2 * far, h, -uy, ux):
-                    far = j
-                if _dot(h + 2 * j, h, ux, uy) > _dot(h + 2 * hi, h, ux, uy):
-                    hi = j
-                if _dot(h + 2 * j, h, ux, uy) < _dot(h + 2 * lo, h, ux, uy):
-                    lo = j
-        else:  # as the edge turns counter-clockwise, so do its extreme vertices
+        if i > 0:  # as the edge turns counter-clockwise, so do its extreme vertices
             far = _walk(hx, m, far, h + 2 * i, -uy, ux)
             hi = _walk(hx, m, hi, h + 2 * i, ux, uy)
             lo = _walk(hx, m, lo, h + 2 * i, -ux, -uy)  # lowest: highest in direction -u
@@ -377,6 +456,7 @@ cdef void _min_area_box(const double* h, Py_ssize_t m, double* u, double* side) 
             best = area if area < best else best
             side[0] = long_side
             side[1] = short_side
+    return perimeter
 
 
 # ------------------------------------------------------------------------------ descriptors
@@ -387,7 +467,7 @@ cdef int _descriptors(
     double* hull, double* work, double* out,
 ) noexcept nogil:
     """Descriptors of the polygon q (n >= 2 points, no repeats, vertex 0 again at n) into
-    out[0:10]; the status (work: 4 n + 8 doubles).
+    out[0:10]; the status (work: 5 n + 8 doubles).
 
     The sums over the vertices are plain sums in vertex order: the moments of a sliver (a
     traced line that still encloses a little area) divide by its area, and the rounding of
@@ -430,24 +510,31 @@ cdef int _descriptors(
     out[2] = cy
 
     # second moments about the centroid: of the filled polygon, or of the curve without area
-    # (edge i -> j written with the wrap, not via vertex 0 again at n: compiled so, the sums
-    # round as they did before, bit for bit)
-    for i in range(n):
-        j = i + 1 if i + 1 < n else 0
-        px = q[2 * i] - cx
-        py = q[2 * i + 1] - cy
-        qx = q[2 * j] - cx
-        qy = q[2 * j + 1] - cy
-        if has_area:
+    # (one loop per case: the curve's square root and division would otherwise be computed
+    # for every polygon too)
+    if has_area:
+        for i in range(n):
+            px = q[2 * i] - cx
+            py = q[2 * i + 1] - cy
+            qx = q[2 * i + 2] - cx
+            qy = q[2 * i + 3] - cy
             w = px * qy - qx * py
             area2 += w
-        else:
+            sxx += w * (px * px + px * qx + qx * qx)
+            syy += w * (py * py + py * qy + qy * qy)
+            sxy += w * (2.0 * px * py + px * qy + qx * py + 2.0 * qx * qy)
+    else:
+        for i in range(n):
+            px = q[2 * i] - cx
+            py = q[2 * i + 1] - cy
+            qx = q[2 * i + 2] - cx
+            qy = q[2 * i + 3] - cy
             ex = qx - px
             ey = qy - py
             w = sqrt(ex * ex + ey * ey) / total
-        sxx += w * (px * px + px * qx + qx * qx)
-        syy += w * (py * py + py * qy + qy * qy)
-        sxy += w * (2.0 * px * py + px * qy + qx * py + 2.0 * qx * qy)
+            sxx += w * (px * px + px * qx + qx * qx)
+            syy += w * (py * py + py * qy + qy * qy)
+            sxy += w * (2.0 * px * py + px * qy + qx * py + 2.0 * qx * qy)
     if has_area:
         sxx /= 6.0 * area2
         syy /= 6.0 * area2
@@ -466,18 +553,17 @@ cdef int _descriptors(
     out[4] = sqrt(scale * (half_trace - root)) if half_trace - root > 0.0 else 0.0
 
     # convex hull and its minimum-area box
-    for i in range(2 * n):
-        sorted_a[i] = q[i]
+    # the points to sort, starting with the contour's last monotone run: on a closed contour
+    # it usually goes on into the first (3 runs become 2, one merge pass fewer); the sorted
+    # points do not depend on the order they come in
+    j = _last_run(q, n)
+    for i in range(2 * (n - j)):
+        sorted_a[i] = q[2 * j + i]
+    for i in range(2 * j):
+        sorted_a[2 * (n - j) + i] = q[i]
     s = _sort_points(sorted_a, sorted_b, n, runs)
     m = _hull(s, n, hull, work)
-    total = 0.0
-    for i in range(m):
-        j = i + 1 if i + 1 < m else 0
-        ex = hull[2 * j] - hull[2 * i]
-        ey = hull[2 * j + 1] - hull[2 * i + 1]
-        total += sqrt(ex * ex + ey * ey)
-    out[7] = total
-    _min_area_box(hull, m, work, side)  # the hull's work is done with
+    out[7] = _min_area_box(hull, m, work, side)  # the hull's work is done with
     long_side = side[0]
     short_side = side[1]
     if short_side > 1e-12 * long_side:
@@ -818,6 +904,7 @@ cdef int _series(
     cdef double* s4 = inv_m + 6 * nc
     cdef double ac[3]
     cdef double sums[8]
+    cdef int64_t bits, top = 0
     cdef double x0, y0, r2, ir, ex, ey, inv_len, nx, ny, d, scale2 = 0.0, thresh
     cdef double net, total, h_du, ar_du, ai_du, winding, norm, tr, ti
     for k in range(7 * nc):
@@ -854,9 +941,13 @@ cdef int _series(
         gir[i] = gir[0]
         wx[i] = wx[0]
         wy[i] = wy[0]
-    for i in range(n):  # (a max does not vectorise)
+    # the largest r^2 as the largest bit pattern (r^2 >= +0: its bits as an int64 order like
+    # the numbers), an integer max that vectorises where a floating-point one does not
+    for i in range(n):
         r2 = gx[i] * gx[i] + gy[i] * gy[i]
-        scale2 = r2 if r2 > scale2 else scale2
+        memcpy(&bits, &r2, 8)
+        top = bits if bits > top else top
+    memcpy(&scale2, &top, 8)
     thresh = 1e-12 * sqrt(scale2)  # edges on a line through the centre add nothing
     if n_r >= 0:
         # log r = -log(1 / r): 1 / r is a normal number (r^2 a finite double); an infinite
@@ -981,10 +1072,9 @@ cdef void _contour(
     if n_raw < min_points:
         status[0] = S_TOO_FEW_POINTS
         return
-    for i in range(2 * n_raw):
-        if not isfinite(src[i]):
-            status[0] = S_NON_FINITE
-            return
+    if not _all_finite(src, 2 * n_raw):
+        status[0] = S_NON_FINITE
+        return
     n = _dedup(src, n_raw, True, q)
     if n > 0:  # vertex 0 again after the last: the closing edge without a wrap
         q[2 * n] = q[0]
@@ -1005,9 +1095,9 @@ cdef void _contour(
 cdef Py_ssize_t _buffer_size(Py_ssize_t max_n, int n_r, int n_rho) noexcept nogil:
     """Doubles of work :func:`_contour` needs for contours of up to max_n points: the points
     (with vertex 0 again after the last), then the work of the descriptors (two sorted copies,
-    the hull, its work: three parts like the points' and 4 max_n + 8) or the series'."""
+    the hull, its work: three parts like the points' and 5 max_n + 8) or the series'."""
     cdef Py_ssize_t part = _round_up(2 * max_n + 2)
-    cdef Py_ssize_t series = _series_work(max_n, n_r, n_rho), descriptors = 3 * part + 4 * max_n + 8
+    cdef Py_ssize_t series = _series_work(max_n, n_r, n_rho), descriptors = 3 * part + 5 * max_n + 8
     return part + (series if series > descriptors else descriptors)
 
 
@@ -1180,7 +1270,7 @@ def min_area_box(const double[:, ::1] points):
     hull = convex_hull(points)
     cdef const double[:, ::1] h = hull
     m = h.shape[0]
-    u = np.empty(4 * m + 8, np.float64)
+    u = np.empty(5 * m + 8, np.float64)
     cdef double[::1] uv = u
     _min_area_box(&h[0, 0], m, &uv[0], side)
     return side[0], side[1]
