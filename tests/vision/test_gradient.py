@@ -12,8 +12,10 @@ from labauto.vision.kernels.gradient import max_channel_sobel
 # sigmas of the 3x3 blur (below 0.75): no blur (tap 0), both sides of the first rounding step
 # (tap 0 -> 1 at 0.28320), the default, and the largest taps (57 -> 58 at 0.74661)
 SIGMAS_3X3 = [0.1, 0.2831, 0.2833, 0.45, 0.5, 0.6, 0.7, 0.709, 0.74, 0.7466, 0.7467, 0.7499]
-# sizes: the smallest, single rows and columns of blocks, odd sizes (threads get unequal blocks)
+# sizes: the smallest, single rows and columns of blocks, odd sizes (threads get unequal blocks),
+# and rows of many SIMD vectors with a ragged end (301 pixels: 903 bytes)
 SHAPES = [(2, 2), (3, 3), (2, 57), (57, 2), (3, 40), (5, 7), (17, 33), (64, 129), (101, 31)]
+SHAPES += [(6, 301)]
 
 
 def _strongest_channel_reference(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
