@@ -563,6 +563,28 @@ def test_geometric_fit_from_special_starts_equals_the_reference() -> None:
         assert (fit.iterations, fit.converged) == (iterations, converged)
 
 
+@pytest.mark.parametrize("n", [5, 6, 7, 8, 9, 127, 128, 129, 130, 131, 257, 300])
+def test_every_contour_length_equals_the_plain_reference(n: int) -> None:
+    # the kernel works on blocks of points, the last one padded to a multiple of 4 points,
+    # and sums four points at a time: every length modulo 4, one block and several
+    gen = np.random.default_rng(n)
+    truth = TRUTHS[n % 3]
+    pts = truth.sample(n, 0.3, 0.3 + gen.uniform(2.0, 2.0 * np.pi))
+    pts += gen.normal(0.0, 0.3, pts.shape)
+    start = fit_ellipse_algebraic(pts)
+    assert_same_ellipse(start, ref_algebraic(pts), 1e-9 * start.axes[0])
+    for max_iter, tol in ((50, 1e-9), (5, 1e-5)):
+        fit = fit_ellipse_geometric(pts, max_iter=max_iter, tol=tol)
+        ref, rms, iterations, converged = ref_geometric(pts, start, max_iter, tol)
+        assert_same_ellipse(fit.ellipse, ref, 1e-9)
+        assert fit.rms == pytest.approx(rms, rel=1e-9, abs=1e-12)
+        assert (fit.iterations, fit.converged) == (iterations, converged)
+    u, v = gen.uniform(-60.0, 60.0, (2, n))
+    cu, cv = contact_points(u, v, 40.0, 25.0)
+    ref_u, ref_v, _ = ref_contact(u, v, 40.0, 25.0)
+    assert np.allclose(cu, ref_u, rtol=0, atol=4e-10) and np.allclose(cv, ref_v, rtol=0, atol=4e-10)
+
+
 def test_batch_edge_cases() -> None:
     # nothing at all; only unusable contours; one contour
     assert fit_ellipses_geometric_batch(np.zeros((0, 2)), np.array([0])) == []

@@ -8,9 +8,20 @@ contour is fitted on its own, start to end, in plain C: the contours of a batch 
 among threads, and a contour's result does not depend on the rest of the batch. The per-point
 arithmetic is the documented one up to rounding (the Newton step over a common denominator,
 divisions by a contour's constants as multiplications by their reciprocals); the per-point
-stages run on blocks of points so that the compiler vectorises them; sums over a contour's
-points run in point order. Compiled with ``-fno-math-errno`` (see the second line) so that
-loops with ``sqrt`` vectorise.
+stages run on blocks of up to BLOCK points so that the compiler vectorises them. A contour's
+last block is padded to a multiple of 4 points by repeating its last point (the padding takes
+the same Newton steps as that point, so it costs no extra sweep), so that the loops run over
+whole vectors of 4 doubles without a scalar remainder; the padding adds nothing to any sum
+or result.
+
+Sums over a contour's points (the moments of the algebraic fit, the cost, J^T d and J^T J of
+the geometric fit) run in point order, each sum exactly as a scalar loop adds. With AVX they
+are computed four points at a time (see "ordered sums" below): the terms as vectors over four
+points, a 4x4 transpose, then one vector add per point into four sums at once - the same
+additions in the same order, so the same bits, with a half to a third of the instructions of
+the compiler's own in-order reduction; without AVX a plain loop does the same sums. Compiled with
+``-fno-math-errno`` (see the second line) so that loops with ``sqrt`` vectorise, and (setup.py)
+with ``-ffp-contract=off``: no fused multiply-adds, every product and sum rounded as written.
 
 Parameter rows are ``(cx, cy, a, b, angle_deg)``. Status codes: 0 ok, 1 fewer than 5 points,
 2 degenerate points, 3 the best conic is not an ellipse (4: a bad initial row).
@@ -31,8 +42,162 @@ cdef enum:
     NOT_ELLIPSE = 3
     BAD_INITIAL = 4
 cdef enum:
-    BLOCK = 32  # points per block of the per-point stages
+    BLOCK = 128  # points per block of the per-point stages
     PARALLEL_MIN_POINTS = 2000  # smaller batches run on one thread (no thread start-up)
+
+
+# ---------------------------------------------------------------------------- ordered sums
+
+
+cdef extern from *:
+    """
+    #if defined(__AVX__)
+    #include <immintrin.h>
+    /* Four sums (the lanes of acc) plus four points' terms, point by point: lane l of a, b,
+       c, e is point l's term of sum 0, 1, 2, 3. A 4x4 transpose gives one vector per point,
+       added to acc in point order, so every sum sees exactly the additions of a scalar loop
+       over the points. */
+    static inline __m256d labauto_add_points(__m256d acc, __m256d a, __m256d b, __m256d c,
+                                             __m256d e) {
+        const __m256d ab0 = _mm256_unpacklo_pd(a, b), ab1 = _mm256_unpackhi_pd(a, b);
+        const __m256d ce0 = _mm256_unpacklo_pd(c, e), ce1 = _mm256_unpackhi_pd(c, e);
+        acc = _mm256_add_pd(acc, _mm256_permute2f128_pd(ab0, ce0, 0x20));  /* point 0 */
+        acc = _mm256_add_pd(acc, _mm256_permute2f128_pd(ab1, ce1, 0x20));  /* point 1 */
+        acc = _mm256_add_pd(acc, _mm256_permute2f128_pd(ab0, ce0, 0x31));  /* point 2 */
+        return _mm256_add_pd(acc, _mm256_permute2f128_pd(ab1, ce1, 0x31));  /* point 3 */
+    }
+    #endif
+
+    /* The sums of _evaluate over m points, added to acc[0..20] in point order:
+       acc[0] += d^2, acc[1 + r] += j_r d, acc[6 + q] += j_r j_c (r <= c, row by row: the
+       upper triangle of J^T J), with d = dd[k] and j_r = jj[r * stride + k]. With AVX four
+       points at a time (the products as vectors over the points, then labauto_add_points for
+       acc[0..19], the four terms of acc[20] added one by one); the rest, or every point
+       without AVX, in a plain loop. The same sums to the last bit either way. */
+    static void labauto_normal_sums(const double* dd, const double* jj, Py_ssize_t stride,
+                                    Py_ssize_t m, double* acc) {
+        Py_ssize_t k = 0;
+        int r, c, q;
+        double d, j[5];
+    #if defined(__AVX__)
+        if (m >= 4) {
+            __m256d s0 = _mm256_loadu_pd(acc), s1 = _mm256_loadu_pd(acc + 4);
+            __m256d s2 = _mm256_loadu_pd(acc + 8), s3 = _mm256_loadu_pd(acc + 12);
+            __m256d s4 = _mm256_loadu_pd(acc + 16);
+            __m128d h44 = _mm_load_sd(acc + 20);
+            for (; k + 4 <= m; k += 4) {
+                const __m256d vd = _mm256_loadu_pd(dd + k);
+                const __m256d j0 = _mm256_loadu_pd(jj + k);
+                const __m256d j1 = _mm256_loadu_pd(jj + stride + k);
+                const __m256d j2 = _mm256_loadu_pd(jj + 2 * stride + k);
+                const __m256d j3 = _mm256_loadu_pd(jj + 3 * stride + k);
+                const __m256d j4 = _mm256_loadu_pd(jj + 4 * stride + k);
+                s0 = labauto_add_points(s0, _mm256_mul_pd(vd, vd), _mm256_mul_pd(j0, vd),
+                                        _mm256_mul_pd(j1, vd), _mm256_mul_pd(j2, vd));
+                s1 = labauto_add_points(s1, _mm256_mul_pd(j3, vd), _mm256_mul_pd(j4, vd),
+                                        _mm256_mul_pd(j0, j0), _mm256_mul_pd(j0, j1));
+                s2 = labauto_add_points(s2, _mm256_mul_pd(j0, j2), _mm256_mul_pd(j0, j3),
+                                        _mm256_mul_pd(j0, j4), _mm256_mul_pd(j1, j1));
+                s3 = labauto_add_points(s3, _mm256_mul_pd(j1, j2), _mm256_mul_pd(j1, j3),
+                                        _mm256_mul_pd(j1, j4), _mm256_mul_pd(j2, j2));
+                s4 = labauto_add_points(s4, _mm256_mul_pd(j2, j3), _mm256_mul_pd(j2, j4),
+                                        _mm256_mul_pd(j3, j3), _mm256_mul_pd(j3, j4));
+                /* the last sum alone: its four terms in order */
+                const __m256d t = _mm256_mul_pd(j4, j4);
+                const __m128d t01 = _mm256_castpd256_pd128(t);
+                const __m128d t23 = _mm256_extractf128_pd(t, 1);
+                h44 = _mm_add_sd(_mm_add_sd(h44, t01), _mm_unpackhi_pd(t01, t01));
+                h44 = _mm_add_sd(_mm_add_sd(h44, t23), _mm_unpackhi_pd(t23, t23));
+            }
+            _mm256_storeu_pd(acc, s0);
+            _mm256_storeu_pd(acc + 4, s1);
+            _mm256_storeu_pd(acc + 8, s2);
+            _mm256_storeu_pd(acc + 12, s3);
+            _mm256_storeu_pd(acc + 16, s4);
+            _mm_store_sd(acc + 20, h44);
+        }
+    #endif
+        for (; k < m; k++) {  /* the rest (or every point without AVX) */
+            d = dd[k];
+            for (r = 0; r < 5; r++) j[r] = jj[r * stride + k];
+            acc[0] += d * d;
+            for (r = 0; r < 5; r++) acc[1 + r] += j[r] * d;
+            q = 6;
+            for (r = 0; r < 5; r++)
+                for (c = r; c < 5; c++) acc[q++] += j[r] * j[c];
+        }
+    }
+
+    /* The moment sums of _algebraic over n points (x, y interleaved), added to mom[0..13] in
+       point order: x, y, x^2, xy, y^2, x^3, x^2 y, x y^2, y^3, x^4, x^3 y, x^2 y^2, x y^3, y^4
+       of x = (x - mx) inv, y = (y - my) inv (the products as written below). mom[14..15]
+       must be 0 (padding, left 0). With AVX four points at a time, as labauto_normal_sums
+       (the points de-interleaved into a vector of four x and one of four y). */
+    static void labauto_moment_sums(const double* pts, Py_ssize_t n, double mx, double my,
+                                    double inv, double* mom) {
+        Py_ssize_t i = 0;
+        double x, y, xx, xy, yy;
+    #if defined(__AVX__)
+        if (n >= 4) {
+            __m256d s0 = _mm256_loadu_pd(mom), s1 = _mm256_loadu_pd(mom + 4);
+            __m256d s2 = _mm256_loadu_pd(mom + 8), s3 = _mm256_loadu_pd(mom + 12);
+            const __m256d z = _mm256_setzero_pd(), vmx = _mm256_set1_pd(mx);
+            const __m256d vmy = _mm256_set1_pd(my), vinv = _mm256_set1_pd(inv);
+            for (; i + 4 <= n; i += 4) {
+                /* (x0 y0 x1 y1), (x2 y2 x3 y3) -> (x0 y0 x2 y2), (x1 y1 x3 y3) -> x, y */
+                const __m256d p01 = _mm256_loadu_pd(pts + 2 * i);
+                const __m256d p23 = _mm256_loadu_pd(pts + 2 * i + 4);
+                const __m256d p02 = _mm256_permute2f128_pd(p01, p23, 0x20);
+                const __m256d p13 = _mm256_permute2f128_pd(p01, p23, 0x31);
+                const __m256d vx = _mm256_mul_pd(
+                    _mm256_sub_pd(_mm256_unpacklo_pd(p02, p13), vmx), vinv);
+                const __m256d vy = _mm256_mul_pd(
+                    _mm256_sub_pd(_mm256_unpackhi_pd(p02, p13), vmy), vinv);
+                const __m256d vxx = _mm256_mul_pd(vx, vx), vxy = _mm256_mul_pd(vx, vy);
+                const __m256d vyy = _mm256_mul_pd(vy, vy);
+                s0 = labauto_add_points(s0, vx, vy, vxx, vxy);
+                s1 = labauto_add_points(s1, vyy, _mm256_mul_pd(vxx, vx), _mm256_mul_pd(vxx, vy),
+                                        _mm256_mul_pd(vx, vyy));
+                s2 = labauto_add_points(s2, _mm256_mul_pd(vyy, vy), _mm256_mul_pd(vxx, vxx),
+                                        _mm256_mul_pd(vxx, vxy), _mm256_mul_pd(vxx, vyy));
+                s3 = labauto_add_points(s3, _mm256_mul_pd(vxy, vyy), _mm256_mul_pd(vyy, vyy),
+                                        z, z);
+            }
+            _mm256_storeu_pd(mom, s0);
+            _mm256_storeu_pd(mom + 4, s1);
+            _mm256_storeu_pd(mom + 8, s2);
+            _mm256_storeu_pd(mom + 12, s3);
+        }
+    #endif
+        for (; i < n; i++) {  /* the rest (or every point without AVX) */
+            x = (pts[2 * i] - mx) * inv;
+            y = (pts[2 * i + 1] - my) * inv;
+            xx = x * x;
+            xy = x * y;
+            yy = y * y;
+            mom[0] += x;
+            mom[1] += y;
+            mom[2] += xx;
+            mom[3] += xy;
+            mom[4] += yy;
+            mom[5] += xx * x;
+            mom[6] += xx * y;
+            mom[7] += x * yy;
+            mom[8] += yy * y;
+            mom[9] += xx * xx;
+            mom[10] += xx * xy;
+            mom[11] += xx * yy;
+            mom[12] += xy * yy;
+            mom[13] += yy * yy;
+        }
+    }
+    """
+    void _moment_sums "labauto_moment_sums"(
+        const double* pts, Py_ssize_t n, double mx, double my, double inv, double* mom
+    ) noexcept nogil
+    void _normal_sums "labauto_normal_sums"(
+        const double* dd, const double* jj, Py_ssize_t stride, Py_ssize_t m, double* acc
+    ) noexcept nogil
 
 
 # ------------------------------------------------------------------------------ small helpers
@@ -339,8 +504,7 @@ cdef int _algebraic(const double* pts, Py_ssize_t n, double* out) noexcept nogil
     """Halir-Flusser direct fit of n points (x, y interleaved) -> ``out`` row; status code."""
     cdef Py_ssize_t i
     cdef double sx = 0.0, sy = 0.0, mx, my, x, y, ss = 0.0, scale, inv
-    cdef double xx, xy, yy
-    cdef double mom[15]  # x^i y^j at index _MOMENT[i][j] below, divided by n
+    cdef double mom[17]  # x^i y^j at _moment_index(i, j), divided by n (2 padding)
     cdef double sc[36]
     cdef double s3[9]
     cdef double t[9]
@@ -369,28 +533,9 @@ cdef int _algebraic(const double* pts, Py_ssize_t n, double* out) noexcept nogil
     scale = sqrt(ss / (2.0 * n))
     scale = scale if scale > 0.0 else 1.0
     inv = 1.0 / scale
-    for i in range(15):
+    for i in range(17):
         mom[i] = 0.0
-    for i in range(n):
-        x = (pts[2 * i] - mx) * inv
-        y = (pts[2 * i + 1] - my) * inv
-        xx = x * x
-        xy = x * y
-        yy = y * y
-        mom[1] += x
-        mom[2] += y
-        mom[3] += xx
-        mom[4] += xy
-        mom[5] += yy
-        mom[6] += xx * x
-        mom[7] += xx * y
-        mom[8] += x * yy
-        mom[9] += yy * y
-        mom[10] += xx * xx
-        mom[11] += xx * xy
-        mom[12] += xx * yy
-        mom[13] += xy * yy
-        mom[14] += yy * yy
+    _moment_sums(pts, n, mx, my, inv, mom + 1)
     for i in range(1, 15):
         mom[i] = mom[i] / n
     mom[0] = 1.0
@@ -470,11 +615,15 @@ cdef void _contact_block(
     """Contact points of m <= BLOCK points ``(u, v)`` on ``u^2/a^2 + v^2/b^2 = 1``.
 
     Writes the contact points ``(cus, cvs)`` and the roots s. ``guess``: the roots of the same
-    points on a nearby ellipse, or NULL (first-order start). Each stage is a branch-free loop
-    over the block (the compiler vectorises them): the first quadrant with the longer axis
-    along x, the Newton start, Newton sweeps over the points still moving (each point stops
-    after its own first step below the tolerance), the contact points; the rare points on the
-    major axis inside the evolute are then redone one by one.
+    points on a nearby ellipse (not ``roots`` itself), or NULL: a first-order start. Each
+    stage is a branch-free loop over the block (the compiler vectorises them): the first
+    quadrant with the longer axis along x, the Newton start, Newton sweeps over the points
+    still moving (each point stops after its own first step below the tolerance), the contact
+    points; the rare points on the major axis inside the evolute are then redone one by one.
+
+    The loops run over whole vectors: m is rounded up to a multiple of 4 here, and every
+    array must hold that many points (the callers pad a block by repeating its last point,
+    which gives the padding the same iterations, so no extra sweep).
     """
     cdef bint swap = a < b
     cdef double big = b if swap else a, small = a if swap else b
@@ -487,9 +636,11 @@ cdef void _contact_block(
     cdef long long act[BLOCK]
     cdef long long inner[BLOCK]
     cdef double u, v, x, y, ax, by, safe, s, s1, step, qx, qy, cu, cv
+    cdef const double* starts = guess  # the Newton starts
     cdef long long n_inner = 0, busy, is_in, moving
     cdef Py_ssize_t k
     cdef int it
+    m = (m + 3) & ~3  # (the compiler then knows that the loops need no scalar remainder)
     for k in range(m):
         u = uu[k]
         v = vv[k]
@@ -502,10 +653,8 @@ cdef void _contact_block(
         xin[k] = x
         xx[k] = big if is_in else x
         yy[k] = y
-    if guess != NULL:
-        for k in range(m):
-            roots[k] = guess[k]
-    else:  # first order: p = c + s grad(Q)/2 at the contact c
+    if guess == NULL:  # first order: p = c + s grad(Q)/2 at the contact c
+        starts = roots
         for k in range(m):
             x = xx[k]
             y = yy[k]
@@ -516,7 +665,7 @@ cdef void _contact_block(
         ax = big * xx[k]
         by = small * yy[k]
         safe = by - b2 if by - b2 > ax - a2 else ax - a2
-        s = roots[k]
+        s = starts[k]
         s = s if s > safe else safe
         ax = ax * ax
         by = by * by
@@ -559,6 +708,14 @@ cdef void _contact_block(
                 cvs[k] = copysign(v, vv[k])
 
 
+cdef inline void _pad_block(double* uu, double* vv, Py_ssize_t m) noexcept nogil:
+    """Repeat the last of m >= 1 points up to a multiple of 4 (``_contact_block``)."""
+    cdef Py_ssize_t k
+    for k in range(m, (m + 3) & ~3):
+        uu[k] = uu[m - 1]
+        vv[k] = vv[m - 1]
+
+
 cdef inline void _to_frame(
     const double* pts, Py_ssize_t m, double xc, double yc, double c, double s,
     double* uu, double* vv,
@@ -583,7 +740,9 @@ cdef double _evaluate(
     returns the sum of squared distances. ``guess``: the roots of the last accepted
     parameters, or NULL. Block by block: the contact points, then the distances along the
     outward normal and Ahn's Jacobian (``-n . d(contact)/d(parameter)``), then the sums in
-    point order.
+    point order. The last block is padded to whole vectors of 4 by repeating its last point
+    (``roots`` and ``guess`` hold n rounded up to a multiple of 4); the padding's distance and
+    Jacobian rows are zeroed, so that they add exact zeros to the sums.
     """
     cdef double xc = p[0], yc = p[1], a = p[2], b = p[3]
     cdef double c = cos(p[4]), sn = sin(p[4])
@@ -594,18 +753,21 @@ cdef double _evaluate(
     cdef double cvs[BLOCK]
     cdef double dd[BLOCK]
     cdef double jj[5 * BLOCK]
-    cdef double cost = 0.0, u, v, fu, fv, nu, nv, norm, d, j0, j1, j2, j3, j4
-    cdef double h00 = 0.0, h01 = 0.0, h02 = 0.0, h03 = 0.0, h04 = 0.0, h11 = 0.0, h12 = 0.0
-    cdef double h13 = 0.0, h14 = 0.0, h22 = 0.0, h23 = 0.0, h24 = 0.0, h33 = 0.0, h34 = 0.0
-    cdef double h44 = 0.0, g0 = 0.0, g1 = 0.0, g2 = 0.0, g3 = 0.0, g4 = 0.0
-    cdef Py_ssize_t start, m, k, blk
+    cdef double acc[21]  # the sums: cost, J^T d (5), J^T J (15) (labauto_normal_sums)
+    cdef double cost, u, v, fu, fv, nu, nv, norm
+    cdef Py_ssize_t start, m, m4, k, blk
+    cdef int r
+    for k in range(21):
+        acc[k] = 0.0
     for blk in range((n + BLOCK - 1) // BLOCK):
         start = blk * BLOCK
         m = n - start if n - start < BLOCK else BLOCK
+        m4 = (m + 3) & ~3
         _to_frame(pts + 2 * start, m, xc, yc, c, sn, uu, vv)
-        _contact_block(uu, vv, m, a, b, guess + start if guess != NULL else NULL, cus, cvs,
+        _pad_block(uu, vv, m)
+        _contact_block(uu, vv, m4, a, b, guess + start if guess != NULL else NULL, cus, cvs,
                        roots + start)
-        for k in range(m):
+        for k in range(m4):
             u = uu[k]
             v = vv[k]
             fu = cus[k]
@@ -621,54 +783,17 @@ cdef double _evaluate(
             jj[2 * BLOCK + k] = -nu * fu * inv_a
             jj[3 * BLOCK + k] = -nv * fv * inv_b
             jj[4 * BLOCK + k] = nu * fv - nv * fu
-        for k in range(m):
-            d = dd[k]
-            j0 = jj[k]
-            j1 = jj[BLOCK + k]
-            j2 = jj[2 * BLOCK + k]
-            j3 = jj[3 * BLOCK + k]
-            j4 = jj[4 * BLOCK + k]
-            cost += d * d
-            g0 += j0 * d
-            g1 += j1 * d
-            g2 += j2 * d
-            g3 += j3 * d
-            g4 += j4 * d
-            h00 += j0 * j0
-            h01 += j0 * j1
-            h02 += j0 * j2
-            h03 += j0 * j3
-            h04 += j0 * j4
-            h11 += j1 * j1
-            h12 += j1 * j2
-            h13 += j1 * j3
-            h14 += j1 * j4
-            h22 += j2 * j2
-            h23 += j2 * j3
-            h24 += j2 * j4
-            h33 += j3 * j3
-            h34 += j3 * j4
-            h44 += j4 * j4
-    hess[0] = h00
-    hess[1] = h01
-    hess[2] = h02
-    hess[3] = h03
-    hess[4] = h04
-    hess[5] = h11
-    hess[6] = h12
-    hess[7] = h13
-    hess[8] = h14
-    hess[9] = h22
-    hess[10] = h23
-    hess[11] = h24
-    hess[12] = h33
-    hess[13] = h34
-    hess[14] = h44
-    grad[0] = g0
-    grad[1] = g1
-    grad[2] = g2
-    grad[3] = g3
-    grad[4] = g4
+        # the padding adds +0 to every sum: no change (a sum starting at +0 is never -0)
+        for k in range(m, m4):
+            dd[k] = 0.0
+            for r in range(5):
+                jj[r * BLOCK + k] = 0.0
+        _normal_sums(dd, jj, BLOCK, m4, acc)
+    for k in range(5):
+        grad[k] = acc[1 + k]
+    for k in range(15):
+        hess[k] = acc[6 + k]
+    cost = acc[0]
     return cost
 
 
@@ -759,7 +884,10 @@ cdef void _fit_one(
     const double* pts, Py_ssize_t n, double* row, int* status, bint seed, int max_iter,
     double tol, double* scratch, double* rms, int* iterations, unsigned char* converged,
 ) noexcept nogil:
-    """Seed and/or fit one contour (``fit_ellipses``); ``scratch`` holds 2 n doubles."""
+    """Seed and/or fit one contour (``fit_ellipses``).
+
+    ``scratch`` holds 2 n4 doubles, n4 = n rounded up to a multiple of 4 (``_evaluate``).
+    """
     cdef int i
     cdef bint ok = True
     if seed:
@@ -774,7 +902,8 @@ cdef void _fit_one(
         return
     if max_iter >= 0:
         _levenberg_marquardt(
-            pts, n, row, max_iter, tol, scratch, scratch + n, rms, iterations, converged
+            pts, n, row, max_iter, tol, scratch, scratch + ((n + 3) & ~3), rms, iterations,
+            converged,
         )
     _normalise(row)
 
@@ -819,9 +948,11 @@ def fit_ellipses(
     every contour's result is the same either way.
     """
     cdef Py_ssize_t c_count = offsets.shape[0] - 1, n_total = points.shape[0]
-    cdef Py_ssize_t k_count = index.shape[0], k, c, n_fit = 0
+    cdef Py_ssize_t k_count = index.shape[0], k, c, n, n_fit = 0, n_scratch = 0
     cdef double* scratch
-    cdef Py_ssize_t* start  # contour j's contact roots: 2 n doubles from scratch + 2 start[j]
+    # contour j's contact roots: 2 n4 doubles from scratch + 2 start[j] (n4: n rounded up to a
+    # multiple of 4, _fit_one)
+    cdef Py_ssize_t* start
     cdef double* base
     if c_count < 0 or params.shape[0] != k_count or params.shape[1] != 5 \
             or status.shape[0] != k_count or rms.shape[0] != k_count \
@@ -842,9 +973,11 @@ def fit_ellipses(
     if start == NULL:
         raise MemoryError()
     for k in range(k_count):
-        start[k] = n_fit
-        n_fit += offsets[index[k] + 1] - offsets[index[k]]
-    scratch = <double*>malloc((2 * n_fit + 1) * sizeof(double))
+        n = offsets[index[k] + 1] - offsets[index[k]]
+        start[k] = n_scratch
+        n_scratch += (n + 3) & ~3
+        n_fit += n
+    scratch = <double*>malloc((2 * n_scratch + 1) * sizeof(double))
     if scratch == NULL:
         free(start)
         raise MemoryError()
@@ -882,6 +1015,7 @@ def orthogonal_distances(
             start = blk * BLOCK
             m = n - start if n - start < BLOCK else BLOCK
             _to_frame(&points[start, 0], m, cx, cy, c, s, uu, vv)
+            _pad_block(uu, vv, m)
             _contact_block(uu, vv, m, a, b, NULL, cus, cvs, roots)
             for k in range(m):
                 nu = cus[k] / (a * a)
@@ -894,7 +1028,11 @@ def contact_points(
     const double[::1] u, const double[::1] v, double a, double b, double[::1] cu, double[::1] cv
 ) -> None:
     """Orthogonal contact points of ``(u, v)`` on ``u^2/a^2 + v^2/b^2 = 1`` into ``cu``, ``cv``."""
-    cdef Py_ssize_t n = u.shape[0], start, m, blk
+    cdef Py_ssize_t n = u.shape[0], start, m, k, blk
+    cdef double uu[BLOCK]
+    cdef double vv[BLOCK]
+    cdef double cus[BLOCK]
+    cdef double cvs[BLOCK]
     cdef double roots[BLOCK]
     if v.shape[0] != n or cu.shape[0] != n or cv.shape[0] != n:
         raise ValueError("contact_points: inconsistent array shapes")
@@ -904,7 +1042,14 @@ def contact_points(
         for blk in range((n + BLOCK - 1) // BLOCK):
             start = blk * BLOCK
             m = n - start if n - start < BLOCK else BLOCK
-            _contact_block(&u[start], &v[start], m, a, b, NULL, &cu[start], &cv[start], roots)
+            for k in range(m):
+                uu[k] = u[start + k]
+                vv[k] = v[start + k]
+            _pad_block(uu, vv, m)
+            _contact_block(uu, vv, m, a, b, NULL, cus, cvs, roots)
+            for k in range(m):
+                cu[start + k] = cus[k]
+                cv[start + k] = cvs[k]
 
 
 def conics_to_params(
