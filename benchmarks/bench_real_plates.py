@@ -1,0 +1,231 @@
+"""Plate analysis on real photographs with ground truth (``../shared/realplates``).
+
+Two sets, scored as ``realplates/README.md`` says:
+
+* ``agar-boxes``: AGAR photographs with a box per colony (YOLO labels). A reported body of
+  estimated count k matches up to k unmatched truth boxes whose centres lie inside its contour
+  (2 px tolerance) or whose box holds its centroid, nearest first (one greedy pass over all
+  body-box pairs of a plate, nearest first). Precision = matched / reported colonies, recall =
+  matched / truth colonies, F1 from both, summed over all plates. ``1399.jpg`` has no labels
+  and is left out.
+* ``phone-counts``: phone photographs counted by hand; the count error of a plate is
+  ``|colonies_estimate - truth| / truth``.
+
+For both sets the table gives every plate and the totals: median count error over the plates
+and how many are over 15 %. The images are read by ``cv2.imread`` (EXIF orientation applied).
+Run: ``python benchmarks/bench_real_plates.py [--data DIR] [--set agar-boxes|phone-counts]
+[--only ID ...]``. The data are development data, not part of labauto; without them the script
+says where it looked and stops.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from labauto.vision.plate import PlateParams, PlateResult, analyze_plate
+
+DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "realplates"
+
+
+@dataclass
+class BoxScore:
+    """Per-plate matching result of the agar-boxes scoring."""
+
+    reported: int
+    truth: int
+    matched: int
+
+
+def read_boxes(label_file: Path, width: int, height: int) -> np.ndarray:
+    """YOLO boxes of a label file as ``(x0, y0, x1, y1)`` rows in image pixels."""
+    rows = []
+    for line in label_file.read_text().split("\n"):
+        parts = line.split()
+        if len(parts) != 5:
+            continue
+        _, xc, yc, bw, bh = map(float, parts)
+        rows.append(
+            ((xc - bw / 2) * width, (yc - bh / 2) * height,
+             (xc + bw / 2) * width, (yc + bh / 2) * height)
+        )  # fmt: skip
+    return np.asarray(rows, float).reshape(-1, 4)
+
+
+def score_boxes(result: PlateResult, boxes: np.ndarray, tolerance_px: float = 2.0) -> BoxScore:
+    """Match a plate's reported colonies to its truth boxes (module docstring)."""
+    centres = np.column_stack(((boxes[:, 0] + boxes[:, 2]) / 2, (boxes[:, 1] + boxes[:, 3]) / 2))
+    pairs: list[tuple[float, int, int]] = []
+    for b, colony in enumerate(result.colonies):
+        cx, cy = colony.centroid
+        contour = np.asarray(colony.contour, np.float32).reshape(-1, 1, 2)
+        x0, y0 = contour[:, 0].min(axis=0) - tolerance_px
+        x1, y1 = contour[:, 0].max(axis=0) + tolerance_px
+        holds_centroid = (
+            (boxes[:, 0] <= cx) & (cx <= boxes[:, 2]) & (boxes[:, 1] <= cy) & (cy <= boxes[:, 3])
+        )
+        near = (centres[:, 0] >= x0) & (centres[:, 0] <= x1)
+        near &= (centres[:, 1] >= y0) & (centres[:, 1] <= y1)
+        for t in np.flatnonzero(near | holds_centroid):
+            inside = cv2.pointPolygonTest(contour, tuple(map(float, centres[t])), True)
+            if inside >= -tolerance_px or holds_centroid[t]:
+                pairs.append((float(np.hypot(*(centres[t] - (cx, cy)))), b, int(t)))
+    pairs.sort()
+    capacity = [c.estimated_count for c in result.colonies]
+    taken = np.zeros(len(boxes), bool)
+    matched = 0
+    for _, b, t in pairs:
+        if capacity[b] > 0 and not taken[t]:
+            capacity[b] -= 1
+            taken[t] = True
+            matched += 1
+    return BoxScore(result.counts["colonies_estimate"], len(boxes), matched)
+
+
+def _f1(p: float, r: float) -> float:
+    return 2 * p * r / (p + r) if p + r > 0 else 0.0
+
+
+def _analyze(path: Path, params: PlateParams | None) -> tuple[PlateResult | None, float, str]:
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        return None, 0.0, "unreadable"
+    t0 = time.perf_counter()
+    try:
+        result = analyze_plate(image, params)
+    except ValueError as exc:
+        return None, (time.perf_counter() - t0) * 1000, str(exc)
+    return result, (time.perf_counter() - t0) * 1000, ""
+
+
+def run_agar_boxes(folder: Path, only: set[str], params: PlateParams | None) -> dict[str, float]:
+    """Score the agar-boxes set; print one row per plate and the totals."""
+    print(f"agar-boxes ({folder})")
+    header = f"{'plate':>8s} {'size':>10s} {'truth':>6s} {'found':>6s} {'matched':>8s} "
+    header += f"{'P':>5s} {'R':>5s} {'count err':>9s} {'ms':>7s}"
+    print(header)
+    print("-" * len(header))
+    totals = [0, 0, 0]
+    errors, times = [], []
+    for image_path in sorted((folder / "images").glob("*.jpg"), key=lambda p: int(p.stem)):
+        label = folder / "labels" / f"{image_path.stem}.txt"
+        if not label.exists() or (only and image_path.stem not in only):
+            continue
+        result, ms, why = _analyze(image_path, params)
+        size = cv2.imread(str(image_path), cv2.IMREAD_REDUCED_COLOR_8).shape
+        h, w = size[0] * 8, size[1] * 8
+        if result is not None:
+            h, w = result.height, result.width
+        boxes = read_boxes(label, w, h)
+        if result is None:
+            score = BoxScore(0, len(boxes), 0)
+        else:
+            score = score_boxes(result, boxes)
+        err = abs(score.reported - score.truth) / score.truth
+        errors.append(err)
+        times.append(ms)
+        for i, v in enumerate((score.reported, score.truth, score.matched)):
+            totals[i] += v
+        p = score.matched / score.reported if score.reported else 0.0
+        r = score.matched / score.truth
+        print(
+            f"{image_path.stem:>8s} {w:>4d}x{h:<5d} {score.truth:6d} {score.reported:6d} "
+            f"{score.matched:8d} {p:5.2f} {r:5.2f} {100 * err:8.1f}% {ms:7.0f}"
+            + (f"  ({why})" if why else "")
+        )
+    reported, truth, matched = totals
+    p = matched / reported if reported else 0.0
+    r = matched / truth if truth else 0.0
+    summary = {
+        "plates": len(errors),
+        "precision": p,
+        "recall": r,
+        "f1": _f1(p, r),
+        "median_count_error": float(np.median(errors)) if errors else float("nan"),
+        "over_15": sum(e > 0.15 for e in errors),
+        "max_ms": max(times, default=0.0),
+    }
+    print(
+        f"total: {summary['plates']} plates, {truth} colonies, {reported} reported, {matched} "
+        f"matched: precision {p:.3f}, recall {r:.3f}, F1 {summary['f1']:.3f}; median count "
+        f"error {100 * summary['median_count_error']:.1f} %, {summary['over_15']} plates over "
+        f"15 %; slowest {summary['max_ms']:.0f} ms"
+    )
+    return summary
+
+
+def run_phone_counts(folder: Path, only: set[str], params: PlateParams | None) -> dict[str, float]:
+    """Score the phone-counts set; print one row per plate and the totals."""
+    print(f"phone-counts ({folder})")
+    header = f"{'plate':>9s} {'size':>10s} {'truth':>6s} {'found':>6s} {'count err':>9s} {'ms':>7s}"
+    print(header)
+    print("-" * len(header))
+    errors, times = [], []
+    with open(folder / "counts.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    for row in rows:
+        stem = Path(row["image"]).stem
+        if only and stem not in only:
+            continue
+        truth = int(row["human_count_total_CFU"])
+        result, ms, why = _analyze(folder / "images" / row["image"], params)
+        found = result.counts["colonies_estimate"] if result is not None else 0
+        err = abs(found - truth) / truth
+        errors.append(err)
+        times.append(ms)
+        size = f"{result.width}x{result.height}" if result is not None else "-"
+        note = f"  [{row['note']}]" if row.get("note") else ""
+        print(
+            f"{stem:>9s} {size:>10s} {truth:6d} {found:6d} {100 * err:8.1f}% {ms:7.0f}"
+            + (f"  ({why})" if why else "")
+            + note
+        )
+    summary = {
+        "plates": len(errors),
+        "median_count_error": float(np.median(errors)) if errors else float("nan"),
+        "over_15": sum(e > 0.15 for e in errors),
+        "max_ms": max(times, default=0.0),
+    }
+    print(
+        f"total: {summary['plates']} plates: median count error "
+        f"{100 * summary['median_count_error']:.1f} %, {summary['over_15']} plates over 15 %; "
+        f"slowest {summary['max_ms']:.0f} ms"
+    )
+    return summary
+
+
+def main() -> int:
+    """Score the sets found under ``--data``."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
+    ap.add_argument("--set", choices=("agar-boxes", "phone-counts"), action="append")
+    ap.add_argument("--only", nargs="*", default=[], help="image stems to score")
+    args = ap.parse_args()
+    sets = args.set or ["agar-boxes", "phone-counts"]
+    missing = [s for s in sets if not (args.data / s).is_dir()]
+    if missing:
+        print(
+            f"bench_real_plates: no real plate data at {args.data} (missing {', '.join(missing)}); "
+            "pass --data DIR pointing at a folder with agar-boxes/ and phone-counts/",
+            file=sys.stderr,
+        )
+        return 2
+    only = set(args.only)
+    for name in sets:
+        if name == "agar-boxes":
+            run_agar_boxes(args.data / name, only, None)
+        else:
+            run_phone_counts(args.data / name, only, None)
+        print()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
