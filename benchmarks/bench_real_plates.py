@@ -119,15 +119,9 @@ def run_agar_boxes(folder: Path, only: set[str], params: PlateParams | None) -> 
         if not label.exists() or (only and image_path.stem not in only):
             continue
         result, ms, why = _analyze(image_path, params)
-        size = cv2.imread(str(image_path), cv2.IMREAD_REDUCED_COLOR_8).shape
-        h, w = size[0] * 8, size[1] * 8
-        if result is not None:
-            h, w = result.height, result.width
+        h, w = cv2.imread(str(image_path), cv2.IMREAD_COLOR).shape[:2]
         boxes = read_boxes(label, w, h)
-        if result is None:
-            score = BoxScore(0, len(boxes), 0)
-        else:
-            score = score_boxes(result, boxes)
+        score = BoxScore(0, len(boxes), 0) if result is None else score_boxes(result, boxes)
         err = abs(score.reported - score.truth) / score.truth
         errors.append(err)
         times.append(ms)

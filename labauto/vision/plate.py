@@ -68,6 +68,13 @@ import numpy as np
 
 from labauto.vision.detector import DetectorParams, detect
 from labauto.vision.dish import Dish, as_plate_image, find_dish
+from labauto.vision.plate_background import (
+    adaptive_threshold,
+    deviation,
+    hysteresis,
+    local_background,
+)
+from labauto.vision.plate_scale import WorkingCopy, image_scale, pixel_params, working_copy
 from labauto.vision.shape_angle import shape_angles
 
 __all__ = [
@@ -97,7 +104,14 @@ _DISC5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
 
 @dataclass(frozen=True)
 class PlateParams:
-    """Tunables of :func:`analyze_plate` (defaults for ~10 px/mm colour images of a 90 mm dish).
+    """Tunables of :func:`analyze_plate`; sizes in millimetres, turned into pixels per image.
+
+    Every size is physical. The image's scale (pixels per mm) comes from ``px_per_mm`` when a
+    camera calibration gives it, else from the dish found in the image (its diameter is
+    ``dish_diameter_mm``). Images finer than ``analysis_px_per_mm`` are analysed on a copy
+    resampled to that scale (area averaging), and the results are mapped back to the image's
+    pixels, so the same defaults serve a 0.5-Mpixel webcam image and a 16-Mpixel photo. Each
+    ``*_px`` field, when set, overrides its millimetre twin (pixels of the image as given).
 
     Attributes
     ----------
@@ -108,20 +122,32 @@ class PlateParams:
         Find the dish when ``region`` is None; if False the whole image is the usable area.
     dish_radius_range : tuple of float
         Dish radius searched, as fractions of ``min(height, width)``.
-    rim_margin_px : float
-        Width of the band inside the dish edge that is ignored (wall, labels, pen marks).
+    dish_diameter_mm : float
+        Diameter of the agar disc that :func:`find_dish` finds (or ``region`` gives), in mm.
+    px_per_mm : float or None
+        The image's scale from a camera calibration; None: from the dish.
+    analysis_px_per_mm : float
+        Finest scale analysed; finer images are resampled down to it (0: never resample).
+    rim_margin_mm, rim_margin_px : float
+        Width of the band inside the dish edge that is ignored (the wall's shadow). Colonies
+        that touch the meniscus inside it are still found: only their part on the band is cut.
     method : str
         ``"segmentation"`` (eq. 1 with a local background, default) or ``"detector"`` (the generic
         :func:`labauto.vision.detector.detect` on the dish with ``detector`` params).
     color_threshold : float
-        ``t`` of eq. 1: summed squared deviation from the background (grey levels squared).
+        Least ``t`` of eq. 1: summed squared deviation from the background (grey levels squared).
+    noise_factor : float
+        ``t`` is at least this many times the agar's median deviation (its noise); 0: off.
+    low_ratio : float
+        Hysteresis: a body's pixels need only ``low_ratio * t`` when it holds one above ``t``.
     channel_weights : tuple of float
         Weights of the B, G, R squared deviations in eq. 1.
-    background_scale : int
-        Subsampling factor of the background estimate (its detail is ~4x this in pixels).
-    min_colony_area_px, max_colony_area_px : float
-        Objects outside this area range are artefacts (dust) or not colonies.
-    min_width_px : float
+    background_cell_mm, background_scale : float, int
+        Cell of the background estimate (its detail is ~4 cells); ``background_scale`` in px.
+    min_colony_diameter_mm, max_colony_diameter_mm : float
+        Objects smaller (dust) or larger than a disc of these diameters are not colonies;
+        ``min_colony_area_px`` and ``max_colony_area_px`` override them as areas in pixels.
+    min_width_mm, min_width_px : float
         Objects with a mean width ``2 * area / perimeter`` below this are scratches or strokes.
     max_elongation : float
         Objects with a second-moment axis ratio above this are streaks (glare, pen).
@@ -136,7 +162,7 @@ class PlateParams:
     max_concavity : float
         Largest depth of a concavity (distance from the convex hull) relative to the inscribed
         radius for a DES; a waist between two colonies is deeper.
-    edge_skip_px : float
+    edge_skip_mm, edge_skip_px : float
         Pixels this close to a colony's boundary are left out of the mixed-colony test.
     mix_residual : float
         Colour distance (grey levels) from the one-species dome fit that makes a pixel an outlier.
@@ -152,40 +178,68 @@ class PlateParams:
     region: Circle | Polygon | None = None
     detect_dish: bool = True
     dish_radius_range: tuple[float, float] = (0.30, 0.50)
-    rim_margin_px: float = 25.0
+    dish_diameter_mm: float = 90.0
+    px_per_mm: float | None = None
+    analysis_px_per_mm: float = 12.0
+    rim_margin_mm: float = 0.5
+    rim_margin_px: float | None = None
     method: str = "segmentation"
     color_threshold: float = 600.0
+    noise_factor: float = 0.0
+    low_ratio: float = 1.0
     channel_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    background_scale: int = 8
-    min_colony_area_px: float = 60.0
-    max_colony_area_px: float = 60000.0
-    min_width_px: float = 5.0
+    background_cell_mm: float = 0.8
+    background_scale: int | None = None
+    min_colony_diameter_mm: float = 0.3
+    max_colony_diameter_mm: float = 27.0
+    min_colony_area_px: float | None = None
+    max_colony_area_px: float | None = None
+    min_width_mm: float = 0.5
+    min_width_px: float | None = None
     max_elongation: float = 3.5
     max_fill_ratio: float = 5.0
     des_threshold_deg: float = 25.0
     statistic: str = "median"
     max_concavity: float = 0.17
-    edge_skip_px: float = 2.5
+    edge_skip_mm: float = 0.25
+    edge_skip_px: float | None = None
     mix_residual: float = 24.0
     mix_fraction: float = 0.06
     valley_ratio: float = 0.9
     detector: DetectorParams = field(default_factory=lambda: DetectorParams(method="color"))
 
     def __post_init__(self) -> None:
-        positive = (
+        non_negative = (
+            "rim_margin_mm",
             "rim_margin_px",
             "color_threshold",
+            "noise_factor",
+            "analysis_px_per_mm",
+            "min_colony_diameter_mm",
             "min_colony_area_px",
             "max_colony_area_px",
+            "min_width_mm",
             "min_width_px",
             "max_elongation",
             "des_threshold_deg",
             "mix_residual",
+            "edge_skip_mm",
         )
+        for name in non_negative:
+            value = getattr(self, name)
+            if value is not None and not value >= 0:
+                raise ValueError(f"PlateParams.{name} must be >= 0, got {value!r}")
+        positive = ("dish_diameter_mm", "px_per_mm", "background_cell_mm", "max_colony_diameter_mm")
         for name in positive:
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"PlateParams.{name} must be >= 0, got {getattr(self, name)!r}")
-        if self.min_colony_area_px > self.max_colony_area_px:
+            value = getattr(self, name)
+            if value is not None and not (value > 0 and math.isfinite(value)):
+                raise ValueError(f"PlateParams.{name} must be a number > 0, got {value!r}")
+        if self.min_colony_diameter_mm > self.max_colony_diameter_mm:
+            raise ValueError(
+                "PlateParams.min_colony_diameter_mm must not exceed max_colony_diameter_mm"
+            )
+        lo_area, hi_area = self.min_colony_area_px, self.max_colony_area_px
+        if lo_area is not None and hi_area is not None and lo_area > hi_area:
             raise ValueError("PlateParams.min_colony_area_px must not exceed max_colony_area_px")
         if self.method not in ("segmentation", "detector"):
             raise ValueError(
@@ -195,10 +249,10 @@ class PlateParams:
             raise ValueError(
                 f"PlateParams.statistic must be 'median' or 'mean', got {self.statistic!r}"
             )
-        if int(self.background_scale) != self.background_scale or self.background_scale < 1:
+        scale = self.background_scale
+        if scale is not None and (int(scale) != scale or scale < 1):
             raise ValueError(
-                f"PlateParams.background_scale must be an integer >= 1, got "
-                f"{self.background_scale!r}"
+                f"PlateParams.background_scale must be an integer >= 1, got {scale!r}"
             )
         lo, hi = self.dish_radius_range
         if not 0 < lo < hi <= 1:
@@ -206,7 +260,7 @@ class PlateParams:
                 f"PlateParams.dish_radius_range must satisfy 0 < lo < hi <= 1, got "
                 f"{self.dish_radius_range!r}"
             )
-        for name in ("mix_fraction", "valley_ratio"):
+        for name in ("mix_fraction", "valley_ratio", "low_ratio"):
             if not 0 <= getattr(self, name) <= 1:
                 raise ValueError(
                     f"PlateParams.{name} must be in [0, 1], got {getattr(self, name)!r}"
@@ -318,34 +372,67 @@ class PlateResult:
         }
 
 
-def _usable_area(
-    img: np.ndarray, params: PlateParams
-) -> tuple[Dish, tuple[int, int, int, int], np.ndarray]:
-    """Return the dish, the ROI ``(x0, y0, x1, y1)`` and the usable mask (uint8 0/255) in it."""
+def _dish_of(img: np.ndarray, params: PlateParams) -> tuple[Dish, np.ndarray | None]:
+    """The dish (found or configured, original pixels) and the configured polygon, if any."""
     h, w = img.shape[:2]
     region = params.region
     if region is not None and np.asarray(region, dtype=float).shape != (3,):
         poly = np.asarray(region, dtype=np.float64)
         (ccx, ccy), cr = cv2.minEnclosingCircle(poly.astype(np.float32))
-        dish = Dish((float(ccx), float(ccy)), float(cr))
+        return Dish((float(ccx), float(ccy)), float(cr)), poly
+    if region is not None:
+        return Dish((float(region[0]), float(region[1])), float(region[2])), None
+    if params.detect_dish:
+        return find_dish(img, params.dish_radius_range), None
+    whole = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], np.float64)
+    return Dish(((w - 1) / 2, (h - 1) / 2), min(h, w) / 2), whole
+
+
+def prepare_plate(
+    img: np.ndarray, params: PlateParams
+) -> tuple[Dish, WorkingCopy, PlateParams, tuple[int, int], np.ndarray]:
+    """Dish, working copy, pixel-resolved params, ROI origin and usable mask of a plate image.
+
+    The dish is in the original image's pixels; the ROI origin ``(x0, y0)`` and the usable mask
+    are in the working copy's (see :mod:`labauto.vision.plate_scale`).
+    """
+    dish, polygon = _dish_of(img, params)
+    if polygon is not None:
+        bounds = (*polygon.min(axis=0), *polygon.max(axis=0))
+    else:
+        (cx, cy), r = dish.center, dish.radius
+        bounds = (cx - r, cy - r, cx + r, cy + r)
+    copy = working_copy(img, bounds, image_scale(dish.radius, params), params)
+    params = pixel_params(params, copy)
+    (wcx, wcy), wr = copy.to_working(dish.center), dish.radius * copy.factor
+    work_poly = None if polygon is None else copy.to_working(polygon)
+    (x0, y0, _, _), usable = _usable_area(copy.image, Dish((wcx, wcy), wr), work_poly, params)
+    return dish, copy, params, (x0, y0), usable
+
+
+def _usable_area(
+    img: np.ndarray, dish: Dish, polygon: np.ndarray | None, params: PlateParams
+) -> tuple[tuple[int, int, int, int], np.ndarray]:
+    """The ROI ``(x0, y0, x1, y1)`` and the usable mask (uint8 0/255) in it.
+
+    ``dish`` and ``polygon`` are in ``img``'s pixels; a circle is shrunk by ``rim_margin_px``,
+    a polygon is used as it is.
+    """
+    h, w = img.shape[:2]
+    if polygon is not None:
+        poly = polygon
         x0, y0 = max(int(np.floor(poly[:, 0].min())), 0), max(int(np.floor(poly[:, 1].min())), 0)
         x1 = min(int(np.ceil(poly[:, 0].max())) + 1, w)
         y1 = min(int(np.ceil(poly[:, 1].max())) + 1, h)
         mask = np.zeros((max(y1 - y0, 0), max(x1 - x0, 0)), np.uint8)
         cv2.fillPoly(mask, [np.round(poly - [x0, y0]).astype(np.int32)], 255)
     else:
-        if region is not None:
-            dish = Dish((float(region[0]), float(region[1])), float(region[2]))
-        elif params.detect_dish:
-            dish = find_dish(img, params.dish_radius_range)
-        else:
-            dish = Dish(((w - 1) / 2, (h - 1) / 2), min(h, w) / 2)
         cx, cy = dish.center
-        ru = dish.radius - (params.rim_margin_px if params.detect_dish or region else 0.0)
+        ru = dish.radius - float(params.rim_margin_px or 0.0)
         if ru <= 2:
             raise ValueError(
                 f"usable dish radius {ru:.1f} px is too small (dish radius "
-                f"{dish.radius:.1f}, rim_margin_px {params.rim_margin_px})"
+                f"{dish.radius:.1f}, rim margin {params.rim_margin_px:.1f} px)"
             )
         x0, y0 = max(int(cx - ru) - 1, 0), max(int(cy - ru) - 1, 0)
         x1, y1 = min(int(cx + ru) + 2, w), min(int(cy + ru) + 2, h)
@@ -360,11 +447,9 @@ def _usable_area(
             cv2.LINE_8,
             shift,
         )
-        if not params.detect_dish and region is None:
-            mask[:] = 255
     if mask.size == 0 or not mask.any():
         raise ValueError("the usable area of the plate lies outside the image")
-    return dish, (x0, y0, x1, y1), mask
+    return (x0, y0, x1, y1), mask
 
 
 # --------------------------------------------------------------------------------------------
@@ -372,47 +457,12 @@ def _usable_area(
 
 
 def _deviation(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> np.ndarray:
-    """Summed squared colour deviation from the local background (float32, ROI-sized).
+    """Eq. 1's summed squared colour deviation from the local background (float32, ROI-sized).
 
-    The background is estimated on the ROI subsampled by ``background_scale`` (a few thousand
-    pixels: cheap whatever the image size); only a few full-size passes follow, all in OpenCV
-    (resize of the background, absolute difference, squares summed over the channels).
+    See :mod:`labauto.vision.plate_background` for how the background is found.
     """
-    h, w = usable.shape
-    s = int(params.background_scale)
-    small = np.ascontiguousarray(roi[::s, ::s])
-    valid = usable[::s, ::s]
-    med = cv2.medianBlur(small, 5)
-    off_median = cv2.transform(cv2.LUT(cv2.absdiff(small, med), _SQUARES), _ONES_3)
-    outlier = cv2.compare(off_median, params.color_threshold * 0.5, cv2.CMP_GT)
-    outlier = cv2.dilate(outlier, np.ones((3, 3), np.uint8))
-    agar = cv2.bitwise_and(valid, cv2.bitwise_not(outlier))  # 255 on the agar used
-    if cv2.countNonZero(agar) < 4:
-        agar = valid
-    if cv2.countNonZero(agar) < 1:
-        agar = np.full_like(valid, 255)
-    weight = cv2.multiply(agar, 1.0 / 255.0, dtype=cv2.CV_32F)  # 0 or 1
-    num = cv2.multiply(small, cv2.merge((weight, weight, weight)), dtype=cv2.CV_32F)
-    num = cv2.GaussianBlur(num, (0, 0), 2.0)
-    den = cv2.GaussianBlur(weight, (0, 0), 2.0)
-    far = den <= 0.05  # no agar nearby: use the dish's mean agar colour
-    bg_small = num / np.maximum(den, 0.05)[..., None]
-    if far.any():
-        bg_small[far] = cv2.mean(small, agar)[:3]
-    bg_small = cv2.convertScaleAbs(bg_small)
-    # back to full size (a shift of (s - 1) / 2 px of this smooth field does not matter)
-    sh, sw = bg_small.shape[:2]
-    bg = cv2.resize(bg_small, (sw * s, sh * s), interpolation=cv2.INTER_LINEAR)[:h, :w]
-    diff = cv2.absdiff(roi, bg)
-    if tuple(params.channel_weights) == (1.0, 1.0, 1.0):
-        # the plain sum of squares, channel by channel into one plane (exact integers; a third
-        # of the memory traffic of a 3-channel float image of squares)
-        dev = np.zeros((h, w), np.float32)
-        for channel in cv2.split(diff):
-            cv2.accumulateSquare(channel, dev)
-        return dev
-    weights = np.asarray(params.channel_weights, np.float32).reshape(1, 3)
-    return cv2.transform(cv2.LUT(diff, _SQUARES), weights)
+    bg = local_background(roi, usable, int(params.background_scale or 1), params.color_threshold)
+    return deviation(roi, bg, params.channel_weights)
 
 
 def _gradients(dev: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -754,8 +804,8 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
         stage_ms[name] = (now - t_stage) * 1000.0
         t_stage = now
 
-    dish, (x0, y0, _, _), usable = _usable_area(img, params)
-    roi = img[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
+    dish, copy, params, (x0, y0), usable = prepare_plate(img, params)
+    roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
     stage_done("dish")
 
     if params.method == "detector":
@@ -781,15 +831,16 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
         klass = "merged"
         if des[b]:
             klass = "mixed" if mix[b] >= params.mix_fraction else "authentic"
+        centroid = copy.to_original(np.add(centroids[k], (x0, y0)))
         colonies.append(
             Colony(
                 id=len(colonies),
-                centroid=(float(centroids[k][0] + x0), float(centroids[k][1] + y0)),
+                centroid=(float(centroid[0]), float(centroid[1])),
                 klass=klass,
-                area_px=float(bodies.area[b]),
+                area_px=float(bodies.area[b]) / copy.factor**2,
                 d_alpha_median=float(d_alpha[k]),
                 estimated_count=int(counts[b]),
-                contour=contours[k].reshape(-1, 2).astype(float) + np.array([x0, y0]),
+                contour=copy.to_original(np.add(contours[k].reshape(-1, 2), (x0, y0))),
                 mix_score=float(mix[b]),
             )
         )
@@ -830,8 +881,12 @@ def _at_rim(usable: np.ndarray, contours: list[np.ndarray]) -> np.ndarray:
 def _objects_by_segmentation(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> _Objects:
     """Contours of eq. 1's objects with D_alpha, centroid-inside and centroid (ROI pixels)."""
     dev = _deviation(roi, usable, params)
-    fg = cv2.bitwise_and(cv2.compare(dev, params.color_threshold, cv2.CMP_GT), usable)
-    found, _ = cv2.findContours(fg, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    t = adaptive_threshold(dev, usable, params.color_threshold, params.noise_factor)
+    fg = hysteresis(dev, usable, t, params.low_ratio * t)
+    # outer boundaries of every body, also of bodies lying in another's hole (a colony inside
+    # the meniscus ring): RETR_CCOMP puts all outer boundaries at the top level
+    traced, hierarchy = cv2.findContours(fg, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+    found = [c for c, h in zip(traced, hierarchy[0] if traced else [], strict=True) if h[3] < 0]
     min_points = max(4, int(2.0 * math.sqrt(params.min_colony_area_px)))
     candidates = [c for c in found if len(c) >= min_points]
     rejected = {"dust": len(found) - len(candidates), "rim": 0}

@@ -8,6 +8,7 @@ merged counts for all bodies at once. These tests keep the straightforward per-b
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -99,23 +100,21 @@ def _reference_mix_score(roi: np.ndarray, body: dict, params: PlateParams) -> fl
 @pytest.fixture(scope="module")
 def stages(plates: list) -> list[tuple]:
     """For three plates: the ROI, contours, foreground, D_alpha test and measured bodies."""
-    params = PlateParams()
     out = []
     for img, _ in plates[:3]:
-        _, (x0, y0, _, _), usable = plate_module._usable_area(img, params)
-        roi = img[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
+        _, copy, params, (x0, y0), usable = plate_module.prepare_plate(img, PlateParams())
+        roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
         contours, d_alpha, inside, _, rejected, fg = plate_module._objects_by_segmentation(
             roi, usable, params
         )
         des_shape = np.asarray(inside, bool) & (d_alpha < params.des_threshold_deg)
         bodies = plate_module._measure_bodies(contours, fg, des_shape, params, rejected)
-        out.append((roi, contours, fg, des_shape, bodies))
+        out.append((roi, contours, fg, des_shape, bodies, params))
     return out
 
 
 def test_canvas_measures_equal_per_crop_measures(stages: list) -> None:
-    params = PlateParams()
-    for _, contours, fg, des_shape, bodies in stages:
+    for _, contours, fg, des_shape, bodies, params in stages:
         assert len(bodies.index) > 20
         for b, k in enumerate(bodies.index):
             ref = _reference_body(contours[k], fg, params)
@@ -134,8 +133,7 @@ def test_canvas_measures_equal_per_crop_measures(stages: list) -> None:
 
 
 def test_vectorised_mix_scores_and_merged_counts_equal_per_body(stages: list) -> None:
-    params = PlateParams()
-    for roi, contours, fg, _, bodies in stages:
+    for roi, contours, fg, _, bodies, params in stages:
         everyone = ~bodies.stroke
         scores = plate_module._mix_scores(roi, bodies, everyone, params)
         counts = plate_module._merged_counts(bodies, everyone, params.valley_ratio)
@@ -150,13 +148,12 @@ def test_vectorised_mix_scores_and_merged_counts_equal_per_body(stages: list) ->
 
 def test_unit_weight_deviation_equals_the_weighted_formula(plates: list) -> None:
     img, _ = plates[4]
-    params = PlateParams()
-    _, (x0, y0, _, _), usable = plate_module._usable_area(img, params)
-    roi = img[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
+    _, copy, params, (x0, y0), usable = plate_module.prepare_plate(img, PlateParams())
+    roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
     fast = plate_module._deviation(roi, usable, params)
-    general = plate_module._deviation(roi, usable, PlateParams(channel_weights=[1.0, 1.0, 1.0]))
+    general = plate_module._deviation(roi, usable, replace(params, channel_weights=[1.0, 1.0, 1.0]))
     np.testing.assert_array_equal(fast, general)
-    halved = plate_module._deviation(roi, usable, PlateParams(channel_weights=(0.5, 0.5, 0.5)))
+    halved = plate_module._deviation(roi, usable, replace(params, channel_weights=(0.5, 0.5, 0.5)))
     np.testing.assert_allclose(halved, fast / 2, rtol=1e-6)
 
 

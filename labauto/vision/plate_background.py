@@ -1,0 +1,130 @@
+"""The agar's own colour, locally, and what departs from it (paper eq. 1, step 2 of plate analysis).
+
+Eq. 1 of the paper marks a pixel as object when its colour departs from the background's mean
+by more than a threshold. On a real plate the "background" is the agar, whose colour drifts
+across the dish (lighting, agar depth, the meniscus at the wall) and which the analysis does not
+know in advance. Choices made here:
+
+* **Background, from the dish itself.** On a grid of cells of ``cell_px`` pixels (about 0.8 mm)
+  a 15x15 median of the cells (~12 mm, wider than most colonies) and a 5x5 one (following the
+  agar's finer drift) each mark the cells that depart from them by more than half the
+  threshold; those are masked out, the mask is grown by one cell, and the remaining agar is
+  spread back over the masked cells by a normalised Gaussian convolution; cells far from any
+  agar (a colony wider than a few millimetres) take the wider convolution's value, and failing
+  that the dish's mean agar colour. The result is resized
+  back to full size (a smooth field: a shift of a fraction of a cell does not matter).
+* **Deviation.** ``dev`` is the summed squared difference over B, G, R from that background
+  (optionally weighted), in grey levels squared, as eq. 1.
+* **Threshold from the image.** Eq. 1's ``t`` is the larger of ``color_threshold`` and
+  ``noise_factor`` times the agar's own noise (the median of ``dev`` over the agar, a robust
+  mean of chi-square distributed values). Faint colonies are taken with hysteresis: a body of
+  pixels above ``low_ratio * t`` is kept when it holds at least one pixel above ``t``; its
+  outline then sits where it departs from the agar, not at the threshold's contour.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+_SQUARES = (np.arange(256, dtype=np.float32) ** 2).reshape(1, 256)
+_ONES_3 = np.ones((1, 3), np.float32)  # cv2.transform: sum of the three channels
+_WIDE_MEDIAN_CELLS = 15  # ~12 mm at 0.8 mm cells: wider than the colonies worth picking
+
+
+def local_background(
+    image: np.ndarray, usable: np.ndarray, cell_px: int, threshold: float
+) -> np.ndarray:
+    """The agar's colour at every pixel of ``image`` (uint8, HxWx3), estimated on the dish.
+
+    Parameters
+    ----------
+    image : ndarray
+        HxWx3 BGR uint8 image (the dish's bounding box).
+    usable : ndarray
+        HxW uint8 mask (255 on the agar whose colour counts).
+    cell_px : int
+        Side of a background cell in pixels (the estimate's detail is about 4 cells).
+    threshold : float
+        Eq. 1 threshold (grey levels squared); cells departing by half of it are not agar.
+    """
+    h, w = usable.shape
+    s = max(int(cell_px), 1)
+    sh, sw = -(-h // s), -(-w // s)
+    small = cv2.resize(image, (sw, sh), interpolation=cv2.INTER_AREA)
+    valid = cv2.resize(usable, (sw, sh), interpolation=cv2.INTER_NEAREST)
+    outlier = np.zeros((sh, sw), np.uint8)
+    for ksize in (_WIDE_MEDIAN_CELLS, 5):  # big colonies first, then the fine detail
+        ksize = min(ksize, 2 * ((min(sh, sw) - 1) // 2) + 1)  # an odd size the grid holds
+        med = cv2.medianBlur(small, ksize) if ksize > 1 else small
+        off_median = cv2.transform(cv2.LUT(cv2.absdiff(small, med), _SQUARES), _ONES_3)
+        outlier |= cv2.compare(off_median, threshold * 0.5, cv2.CMP_GT)
+    outlier = cv2.dilate(outlier, np.ones((3, 3), np.uint8))
+    agar = cv2.bitwise_and(valid, cv2.bitwise_not(outlier))  # 255 on the agar used
+    if cv2.countNonZero(agar) < 4:
+        agar = valid
+    if cv2.countNonZero(agar) < 1:
+        agar = np.full_like(valid, 255)
+    weight = cv2.multiply(agar, 1.0 / 255.0, dtype=cv2.CV_32F)  # 0 or 1
+    weighted = cv2.multiply(small, cv2.merge((weight, weight, weight)), dtype=cv2.CV_32F)
+    mean_agar = np.array(cv2.mean(small, agar)[:3], np.float32)
+    bg_small = np.empty(small.shape, np.float32)
+    bg_small[:] = mean_agar
+    filled = np.zeros((sh, sw), bool)
+    for sigma in (2.0, 6.0):  # near agar first, then wider for the middle of big colonies
+        num = cv2.GaussianBlur(weighted, (0, 0), sigma)
+        den = cv2.GaussianBlur(weight, (0, 0), sigma)
+        here = (den > 0.05) & ~filled
+        bg_small[here] = num[here] / den[here][:, None]
+        filled |= here
+    bg_small = cv2.convertScaleAbs(bg_small)
+    return cv2.resize(bg_small, (w, h), interpolation=cv2.INTER_LINEAR)
+
+
+def deviation(
+    image: np.ndarray, background: np.ndarray, weights: tuple[float, float, float]
+) -> np.ndarray:
+    """Summed (weighted) squared difference over B, G, R from the background (float32, HxW)."""
+    diff = cv2.absdiff(image, background)
+    if tuple(weights) == (1.0, 1.0, 1.0):
+        # the plain sum of squares, channel by channel into one plane (exact integers)
+        dev = np.zeros(diff.shape[:2], np.float32)
+        for channel in cv2.split(diff):
+            cv2.accumulateSquare(channel, dev)
+        return dev
+    return cv2.transform(cv2.LUT(diff, _SQUARES), np.asarray(weights, np.float32).reshape(1, 3))
+
+
+def adaptive_threshold(
+    dev: np.ndarray, usable: np.ndarray, floor: float, noise_factor: float
+) -> float:
+    """Eq. 1's ``t``: ``max(floor, noise_factor * median(dev on the agar))``.
+
+    The median over the usable area is the agar's noise level: colonies cover far less than
+    half of it on any plate worth analysing.
+    """
+    if noise_factor <= 0:
+        return float(floor)
+    step = max(1, int(np.sqrt(dev.size / 250_000)))  # ~250k samples are plenty for a median
+    samples = dev[::step, ::step][usable[::step, ::step] > 0]
+    if samples.size == 0:
+        return float(floor)
+    return float(max(floor, noise_factor * float(np.median(samples))))
+
+
+def hysteresis(dev: np.ndarray, usable: np.ndarray, high: float, low: float) -> np.ndarray:
+    """Pixels above ``low`` connected (8-neighbourhood) to a pixel above ``high``, in ``usable``.
+
+    Returns a uint8 mask (0 / 255).
+    """
+    weak = cv2.bitwise_and(cv2.compare(dev, low, cv2.CMP_GT), usable)
+    if low >= high:
+        return weak
+    n, labels = cv2.connectedComponents(weak, connectivity=8)
+    if n <= 1:
+        return weak
+    strong = labels[(dev > high) & (weak > 0)]
+    keep = np.zeros(n, np.uint8)
+    keep[np.unique(strong)] = 255
+    keep[0] = 0
+    return keep[labels]
