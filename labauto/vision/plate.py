@@ -171,6 +171,9 @@ class PlateParams:
     valley_ratio : float
         Distance-transform dip between two peaks, relative to the lower peak, that separates two
         colonies of a merged body.
+    reject_ink : bool
+        Drop dark bodies whose colour change is that of black or blue ink (labels; see
+        :func:`_ink`). Turn off for plates whose colonies are dark grey or blue.
     detector : DetectorParams
         Parameters passed to the generic detector when ``method == "detector"``.
     """
@@ -206,12 +209,11 @@ class PlateParams:
     mix_residual: float = 24.0
     mix_fraction: float = 0.06
     valley_ratio: float = 0.9
+    reject_ink: bool = True
     detector: DetectorParams = field(default_factory=lambda: DetectorParams(method="color"))
 
     def __post_init__(self) -> None:
         non_negative = (
-            "rim_margin_mm",
-            "rim_margin_px",
             "color_threshold",
             "noise_factor",
             "analysis_px_per_mm",
@@ -229,6 +231,10 @@ class PlateParams:
             value = getattr(self, name)
             if value is not None and not value >= 0:
                 raise ValueError(f"PlateParams.{name} must be >= 0, got {value!r}")
+        for name in ("rim_margin_mm", "rim_margin_px"):
+            value = getattr(self, name)
+            if value is not None and not math.isfinite(value):
+                raise ValueError(f"PlateParams.{name} must be a finite number, got {value!r}")
         positive = ("dish_diameter_mm", "px_per_mm", "background_cell_mm", "max_colony_diameter_mm")
         for name in positive:
             value = getattr(self, name)
@@ -397,12 +403,15 @@ def prepare_plate(
     are in the working copy's (see :mod:`labauto.vision.plate_scale`).
     """
     dish, polygon = _dish_of(img, params)
+    px_per_mm = image_scale(dish.radius, params)
     if polygon is not None:
         bounds = (*polygon.min(axis=0), *polygon.max(axis=0))
     else:
         (cx, cy), r = dish.center, dish.radius
+        margin = params.rim_margin_px
+        r -= min(margin if margin is not None else params.rim_margin_mm * px_per_mm, 0.0)
         bounds = (cx - r, cy - r, cx + r, cy + r)
-    copy = working_copy(img, bounds, image_scale(dish.radius, params), params)
+    copy = working_copy(img, bounds, px_per_mm, params)
     params = pixel_params(params, copy)
     (wcx, wcy), wr = copy.to_working(dish.center), dish.radius * copy.factor
     work_poly = None if polygon is None else copy.to_working(polygon)
@@ -461,8 +470,12 @@ def _deviation(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> np.n
 
     See :mod:`labauto.vision.plate_background` for how the background is found.
     """
-    bg = local_background(roi, usable, int(params.background_scale or 1), params.color_threshold)
-    return deviation(roi, bg, params.channel_weights)
+    return deviation(roi, _background(roi, usable, params), params.channel_weights)
+
+
+def _background(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> np.ndarray:
+    """The agar's local colour (:func:`labauto.vision.plate_background.local_background`)."""
+    return local_background(roi, usable, int(params.background_scale or 1), params.color_threshold)
 
 
 def _gradients(dev: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -632,6 +645,38 @@ def _measure_bodies(
     return _Bodies(
         index, top, left, height, width, row, row_body, mask, dt, area, r_in, stroke, concavity
     )
+
+
+_INK_DARKER = -0.10  # a body this much darker than the agar (mean relative change) ...
+_INK_BLUE_MARGIN = -0.01  # ... whose blue darkens by no more than its red (relatively) is ink
+_INK_FILL = 3.5  # ... when it is also a stroke: area over this many of its inscribed discs
+_INK_STROKE_MM = 1.6  # ... or narrower than this (mm) and longer than two such discs
+
+
+def _ink(roi: np.ndarray, background: np.ndarray, bodies: _Bodies) -> np.ndarray:
+    """True for bodies that are printed or written ink (labels), not colonies.
+
+    Ink on the lid or the dish's bottom is black or blue: it takes away a like share of every
+    channel of the agar seen through it (black) or more of red than of blue (blue ink). The
+    colonies of the real plates we measured (cream, yellow, brown, olive) take away more blue
+    than red: pigments and turbid cell masses absorb short wavelengths first. So a body is ink
+    when it is darker than the agar by at least 10 % (mean relative change over B, G, R) and its
+    relative change in blue is no more negative than in red, less 1 %. Choice and limit: a dark
+    grey or blue colony (rare; some chromogenic media) reads as ink, so
+    ``PlateParams.reject_ink`` turns the test off.
+    """
+    out = np.zeros(len(bodies.index), bool)
+    for b in range(len(bodies.index)):
+        t, lft, h, w, r = (int(v[b]) for v in (bodies.top, bodies.left, bodies.height,
+                                                 bodies.width, bodies.row))  # fmt: skip
+        inside = bodies.mask[r : r + h, :w] > 0
+        if not inside.any():
+            continue
+        colour = roi[t : t + h, lft : lft + w][inside].mean(axis=0)
+        agar = np.maximum(background[t : t + h, lft : lft + w][inside].mean(axis=0), 1.0)
+        rel = colour / agar - 1.0  # B, G, R
+        out[b] = rel.mean() <= _INK_DARKER and rel[0] - rel[2] >= _INK_BLUE_MARGIN
+    return out
 
 
 def _mix_scores(
@@ -808,16 +853,27 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
     stage_done("dish")
 
+    background = _background(roi, usable, params)
     if params.method == "detector":
         objects = _objects_by_detector(roi, usable, params)
     else:
-        objects = _objects_by_segmentation(roi, usable, params)
+        objects = _objects_by_segmentation(roi, usable, params, background)
     contours, d_alpha, inside, centroids, rejected, fg = objects
     stage_done("objects")
 
     # a DES needs its centroid inside and a small D_alpha; only then does the waist matter
     des_shape = np.asarray(inside, bool) & (np.asarray(d_alpha) < params.des_threshold_deg)
     bodies = _measure_bodies(contours, fg, des_shape, params, rejected)
+    if params.reject_ink:
+        # ink colour, and a stroke's shape: much larger than its inscribed disc, or thin (a
+        # pen or dot-matrix stroke) and larger than two such discs
+        fill = bodies.area / np.maximum(math.pi * bodies.r_in**2, 1.0)
+        thin = bodies.r_in < _INK_STROKE_MM / 2 * float(params.px_per_mm or 0.0)
+        strokelike = (fill > _INK_FILL) | (thin & (fill > 2.0))
+        ink = _ink(roi, background, bodies) & strokelike & ~bodies.stroke
+        if ink.any():
+            rejected["ink"] = int(ink.sum())
+            bodies.stroke |= ink
     des = des_shape[bodies.index] & (bodies.concavity < params.max_concavity) & ~bodies.stroke
     stage_done("measures")
     merged = ~des & ~bodies.stroke
@@ -878,9 +934,11 @@ def _at_rim(usable: np.ndarray, contours: list[np.ndarray]) -> np.ndarray:
     return np.logical_or.reduceat(inner[points[:, 1], points[:, 0]] == 0, starts)
 
 
-def _objects_by_segmentation(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> _Objects:
+def _objects_by_segmentation(
+    roi: np.ndarray, usable: np.ndarray, params: PlateParams, background: np.ndarray
+) -> _Objects:
     """Contours of eq. 1's objects with D_alpha, centroid-inside and centroid (ROI pixels)."""
-    dev = _deviation(roi, usable, params)
+    dev = deviation(roi, background, params.channel_weights)
     t = adaptive_threshold(dev, usable, params.color_threshold, params.noise_factor)
     fg = hysteresis(dev, usable, t, params.low_ratio * t)
     # outer boundaries of every body, also of bodies lying in another's hole (a colony inside

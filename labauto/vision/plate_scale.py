@@ -91,7 +91,8 @@ def pixel_params(params: PlateParams, copy: WorkingCopy) -> PlateParams:
     """``params`` with every ``*_px`` size resolved for the working copy.
 
     A ``*_px`` override is in pixels of the original image and is scaled by the copy's factor;
-    otherwise the millimetre value is turned into working pixels.
+    otherwise the millimetre value is turned into working pixels. ``px_per_mm`` becomes the
+    working copy's scale: every size of the returned params is in working pixels.
     """
     f, mm = copy.factor, copy.px_per_mm
 
@@ -105,6 +106,7 @@ def pixel_params(params: PlateParams, copy: WorkingCopy) -> PlateParams:
     cell_px = round(cell * f) if cell is not None else round(params.background_cell_mm * mm)
     return replace(
         params,
+        px_per_mm=mm,
         rim_margin_px=length(params.rim_margin_px, params.rim_margin_mm),
         min_colony_area_px=area(params.min_colony_area_px, params.min_colony_diameter_mm),
         max_colony_area_px=area(params.max_colony_area_px, params.max_colony_diameter_mm),

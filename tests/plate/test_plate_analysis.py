@@ -186,7 +186,10 @@ def test_bad_images_raise_value_error(image: object, word: str) -> None:
     ("kwargs", "word"),
     [
         ({"method": "magic"}, "method"),
-        ({"rim_margin_px": -1}, "rim_margin_px"),
+        ({"rim_margin_px": float("nan")}, "rim_margin_px"),
+        ({"rim_margin_mm": float("inf")}, "rim_margin_mm"),
+        ({"px_per_mm": 0.0}, "px_per_mm"),
+        ({"dish_diameter_mm": -90.0}, "dish_diameter_mm"),
         ({"region": (1, 2)}, "region"),
         ({"region": (10, 10, -5)}, "radius"),
         ({"statistic": "mode"}, "statistic"),

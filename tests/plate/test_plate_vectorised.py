@@ -105,7 +105,7 @@ def stages(plates: list) -> list[tuple]:
         _, copy, params, (x0, y0), usable = plate_module.prepare_plate(img, PlateParams())
         roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
         contours, d_alpha, inside, _, rejected, fg = plate_module._objects_by_segmentation(
-            roi, usable, params
+            roi, usable, params, plate_module._background(roi, usable, params)
         )
         des_shape = np.asarray(inside, bool) & (d_alpha < params.des_threshold_deg)
         bodies = plate_module._measure_bodies(contours, fg, des_shape, params, rejected)
