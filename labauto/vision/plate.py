@@ -653,8 +653,10 @@ _INK_FILL = 3.5  # ... when it is also a stroke: area over this many of its insc
 _INK_STROKE_MM = 1.6  # ... or narrower than this (mm) and longer than two such discs
 
 
-def _ink(roi: np.ndarray, background: np.ndarray, bodies: _Bodies) -> np.ndarray:
-    """True for bodies that are printed or written ink (labels), not colonies.
+def _ink(
+    roi: np.ndarray, background: np.ndarray, bodies: _Bodies, which: np.ndarray
+) -> np.ndarray:
+    """True for the bodies (where ``which`` is true) of printed or written ink (labels).
 
     Ink on the lid or the dish's bottom is black or blue: it takes away a like share of every
     channel of the agar seen through it (black) or more of red than of blue (blue ink). The
@@ -666,7 +668,7 @@ def _ink(roi: np.ndarray, background: np.ndarray, bodies: _Bodies) -> np.ndarray
     ``PlateParams.reject_ink`` turns the test off.
     """
     out = np.zeros(len(bodies.index), bool)
-    for b in range(len(bodies.index)):
+    for b in np.flatnonzero(which).tolist():
         t, lft, h, w, r = (int(v[b]) for v in (bodies.top, bodies.left, bodies.height,
                                                  bodies.width, bodies.row))  # fmt: skip
         inside = bodies.mask[r : r + h, :w] > 0
@@ -870,7 +872,7 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
         fill = bodies.area / np.maximum(math.pi * bodies.r_in**2, 1.0)
         thin = bodies.r_in < _INK_STROKE_MM / 2 * float(params.px_per_mm or 0.0)
         strokelike = (fill > _INK_FILL) | (thin & (fill > 2.0))
-        ink = _ink(roi, background, bodies) & strokelike & ~bodies.stroke
+        ink = _ink(roi, background, bodies, strokelike & ~bodies.stroke)
         if ink.any():
             rejected["ink"] = int(ink.sum())
             bodies.stroke |= ink

@@ -51,8 +51,11 @@ def local_background(
     h, w = usable.shape
     s = max(int(cell_px), 1)
     sh, sw = -(-h // s), -(-w // s)
-    small = cv2.resize(image, (sw, sh), interpolation=cv2.INTER_AREA)
-    valid = cv2.resize(usable, (sw, sh), interpolation=cv2.INTER_NEAREST)
+    # padded to whole cells, so that area averaging takes OpenCV's integer-factor path
+    padded = cv2.copyMakeBorder(image, 0, sh * s - h, 0, sw * s - w, cv2.BORDER_REPLICATE)
+    small = cv2.resize(padded, (sw, sh), interpolation=cv2.INTER_AREA)
+    valid = cv2.copyMakeBorder(usable, 0, sh * s - h, 0, sw * s - w, cv2.BORDER_CONSTANT, value=0)
+    valid = np.ascontiguousarray(valid[s // 2 :: s, s // 2 :: s])  # a cell's centre pixel
     outlier = np.zeros((sh, sw), np.uint8)
     for ksize in (_WIDE_MEDIAN_CELLS, 5):  # big colonies first, then the fine detail
         ksize = min(ksize, 2 * ((min(sh, sw) - 1) // 2) + 1)  # an odd size the grid holds
