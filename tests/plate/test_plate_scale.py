@@ -1,0 +1,121 @@
+"""Plate analysis sizes in millimetres: the same plate at any camera scale reads the same.
+
+Synthetic plates are drawn at ~10 px/mm. Resized to a webcam's 6 px/mm or a photo's 35 px/mm,
+the same colonies must be found with the same classes (positions mapped back), because every
+size is derived from the dish (or a configured ``px_per_mm``) and fine images are analysed on
+a copy resampled to ``analysis_px_per_mm``.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from labauto.synthetic.plates import generate_plate, score_plate
+from labauto.vision.plate import PlateParams, analyze_plate
+from labauto.vision.plate_scale import WorkingCopy, working_copy
+
+REAL = Path(__file__).resolve().parents[3] / "shared" / "realplates"
+
+
+class _Moved:
+    """A reported colony with its centroid mapped back to the generated plate's pixels."""
+
+    def __init__(self, colony: object, f: float) -> None:
+        x, y = colony.centroid  # type: ignore[attr-defined]
+        self.centroid = ((x + 0.5) / f - 0.5, (y + 0.5) / f - 0.5)
+        self.klass = colony.klass  # type: ignore[attr-defined]
+        self.estimated_count = colony.estimated_count  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("factor", [0.6, 3.5])
+def test_same_plate_at_another_camera_scale_reads_the_same(factor: float) -> None:
+    img, truth = generate_plate(5, agar="amber")
+    resized = cv2.resize(
+        img, None, fx=factor, fy=factor,
+        interpolation=cv2.INTER_AREA if factor < 1 else cv2.INTER_CUBIC,
+    )  # fmt: skip
+    result = analyze_plate(resized)
+    score = score_plate(truth, [_Moved(c, factor) for c in result.colonies])  # type: ignore[arg-type]
+    assert score.found == score.n_truth == 30
+    assert score.correct >= 29
+    assert score.false_positives == 0
+    assert result.dish.radius == pytest.approx(truth.dish.radius * factor, rel=0.01)
+    # contours and areas are in the given image's pixels
+    biggest = max(result.colonies, key=lambda c: c.area_px)
+    xs = biggest.contour[:, 0]
+    assert xs.max() - xs.min() == pytest.approx(2 * np.sqrt(biggest.area_px / np.pi), rel=0.6)
+
+
+def test_px_per_mm_from_a_calibration_overrides_the_dish() -> None:
+    img, _ = generate_plate(7, agar="clear")
+    found = analyze_plate(img)
+    # a calibration saying 100 px/mm makes every colony (~20 px) smaller than 0.3 mm: dust
+    tiny = analyze_plate(img, PlateParams(px_per_mm=100.0))
+    assert len(found.colonies) >= 25 and tiny.colonies == []
+    assert tiny.rejected.get("dust", 0) > 0
+
+
+def test_pixel_overrides_win_over_millimetres() -> None:
+    img, _ = generate_plate(7, agar="clear")
+    result = analyze_plate(img, PlateParams(min_colony_area_px=1e6, max_colony_area_px=2e6))
+    assert result.colonies == []
+
+
+def test_working_copy_maps_pixel_centres_both_ways() -> None:
+    image = np.zeros((400, 600, 3), np.uint8)
+    copy = working_copy(image, (100.0, 50.0, 500.0, 350.0), 40.0, PlateParams())
+    assert isinstance(copy, WorkingCopy)
+    assert copy.factor == pytest.approx(12.0 / 40.0, rel=0.01)
+    assert copy.px_per_mm == pytest.approx(12.0, rel=0.01)
+    pts = np.array([[123.25, 77.5], [499.0, 349.0]])
+    np.testing.assert_allclose(copy.to_original(copy.to_working(pts)), pts, atol=1e-9)
+    # a coarse image is used as it is
+    same = working_copy(image, (0.0, 0.0, 599.0, 399.0), 8.0, PlateParams())
+    assert same.factor == 1.0 and same.image is image
+
+
+@pytest.mark.parametrize(("diameter_mm", "params"), [
+    (0.9, PlateParams()),  # the default floor: mean width 0.4 mm, i.e. discs from 0.8 mm
+    (0.45, PlateParams(min_width_mm=0.2)),  # smaller colonies on a clean plate, by config
+])  # fmt: skip
+def test_small_colonies_on_a_photo_survive_the_resampling(
+    diameter_mm: float, params: PlateParams
+) -> None:
+    px_per_mm = 30.0
+    radius = 45.0 * px_per_mm
+    size = int(2 * radius + 200)
+    img = np.full((size, size, 3), 20, np.uint8)
+    c = size / 2
+    cv2.circle(img, (int(c), int(c)), int(radius), (90, 140, 160), -1, cv2.LINE_AA)
+    rng = np.random.default_rng(3)
+    spots = []
+    for _ in range(12):
+        r, a = rng.uniform(0, radius * 0.8), rng.uniform(0, 2 * np.pi)
+        x, y = c + r * np.cos(a), c + r * np.sin(a)
+        spots.append((x, y))
+        r_px = round(diameter_mm / 2 * px_per_mm)
+        cv2.circle(img, (int(x), int(y)), r_px, (230, 235, 240), -1, cv2.LINE_AA)
+    result = analyze_plate(img, params)
+    got = np.array([col.centroid for col in result.colonies]).reshape(-1, 2)
+    for x, y in spots:
+        assert np.min(np.hypot(got[:, 0] - x, got[:, 1] - y)) < 0.3 * px_per_mm
+    if params == PlateParams():  # with the lower floor, bits of the drawn dish edge pass too
+        assert result.counts["colonies_estimate"] == len(spots)
+
+
+@pytest.mark.skipif(not (REAL / "agar-boxes").is_dir(), reason="real plate photos not present")
+def test_real_agar_plate_when_the_data_are_present() -> None:
+    """One real AGAR photo (349: 99 boxed colonies, a printed label): most colonies found."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    from bench_real_plates import read_boxes, score_boxes
+
+    image = cv2.imread(str(REAL / "agar-boxes" / "images" / "349.jpg"), cv2.IMREAD_COLOR)
+    boxes = read_boxes(REAL / "agar-boxes" / "labels" / "349.txt", image.shape[1], image.shape[0])
+    score = score_boxes(analyze_plate(image), boxes)
+    assert score.truth == 99
+    assert score.matched >= 80 and score.reported <= 110
