@@ -6,8 +6,8 @@ across the dish (lighting, agar depth, the meniscus at the wall) and which the a
 know in advance. Choices made here:
 
 * **Background, from the dish itself.** On a grid of cells of ``cell_px`` pixels (about 0.8 mm)
-  a 15x15 median of the cells (~12 mm, wider than most colonies) and a 5x5 one (following the
-  agar's finer drift) each mark the cells that depart from them by more than half the
+  a 31x31 median of the cells (~25 mm, wider than the largest colonies) and a 5x5 one
+  (following the agar's finer drift) each mark the cells that depart from them by more than half the
   threshold; those are masked out, the mask is grown by one cell, and the remaining agar is
   spread back over the masked cells by a normalised Gaussian convolution; cells far from any
   agar (a colony wider than a few millimetres) take the wider convolution's value, and failing
@@ -29,7 +29,7 @@ import numpy as np
 
 _SQUARES = (np.arange(256, dtype=np.float32) ** 2).reshape(1, 256)
 _ONES_3 = np.ones((1, 3), np.float32)  # cv2.transform: sum of the three channels
-_WIDE_MEDIAN_CELLS = 15  # ~12 mm at 0.8 mm cells: wider than the colonies worth picking
+_WIDE_MEDIAN_CELLS = 31  # ~25 mm at 0.8 mm cells: wider than the largest colonies
 
 
 def local_background(
