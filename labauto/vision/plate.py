@@ -378,6 +378,18 @@ class PlateResult:
         }
 
 
+_MAX_RIM_OUTSIDE = 0.25  # share of the dish's rim that may lie outside the image
+
+
+def _rim_outside(dish: Dish, width: int, height: int) -> float:
+    """The share of the dish's rim (circle) that lies outside the image, from 360 samples."""
+    theta = np.linspace(0.0, 2 * np.pi, 360, endpoint=False)
+    x = dish.center[0] + dish.radius * np.cos(theta)
+    y = dish.center[1] + dish.radius * np.sin(theta)
+    inside = (x >= -0.5) & (x <= width - 0.5) & (y >= -0.5) & (y <= height - 0.5)
+    return float(1.0 - inside.mean())
+
+
 def _dish_of(img: np.ndarray, params: PlateParams) -> tuple[Dish, np.ndarray | None]:
     """The dish (found or configured, original pixels) and the configured polygon, if any."""
     h, w = img.shape[:2]
@@ -389,7 +401,16 @@ def _dish_of(img: np.ndarray, params: PlateParams) -> tuple[Dish, np.ndarray | N
     if region is not None:
         return Dish((float(region[0]), float(region[1])), float(region[2])), None
     if params.detect_dish:
-        return find_dish(img, params.dish_radius_range), None
+        dish = find_dish(img, params.dish_radius_range)
+        outside = _rim_outside(dish, w, h)
+        if outside > _MAX_RIM_OUTSIDE:
+            (cx, cy), r = dish.center, dish.radius
+            raise ValueError(
+                f"the dish found at ({cx:.0f}, {cy:.0f}) px, radius {r:.0f} px, is cut by the "
+                f"image border ({100 * outside:.0f} % of its rim lies outside the frame): frame "
+                f"the whole dish, or set plate.detect_dish to false to analyse the whole image"
+            )
+        return dish, None
     whole = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], np.float64)
     return Dish(((w - 1) / 2, (h - 1) / 2), min(h, w) / 2), whole
 

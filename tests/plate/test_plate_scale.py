@@ -119,3 +119,15 @@ def test_real_agar_plate_when_the_data_are_present() -> None:
     score = score_boxes(analyze_plate(image), boxes)
     assert score.truth == 99
     assert score.matched >= 80 and score.reported <= 110
+
+
+def test_a_dish_cut_by_the_frame_is_named_or_analysed_whole_when_configured() -> None:
+    img, _ = generate_plate(9, agar="amber")
+    cut = np.ascontiguousarray(img[:, : img.shape[1] // 2 + 40])  # the right half is gone
+    with pytest.raises(ValueError, match=r"cut by the image border.*detect_dish"):
+        analyze_plate(cut)
+    whole = analyze_plate(cut, PlateParams(detect_dish=False))
+    assert len(whole.colonies) >= 8
+    # a dish that only touches the frame (real photos do) is fine
+    edge = np.ascontiguousarray(img[:, 100:])
+    assert len(analyze_plate(edge).colonies) >= 25
