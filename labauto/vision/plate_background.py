@@ -51,15 +51,24 @@ def local_background(
     h, w = usable.shape
     s = max(int(cell_px), 1)
     sh, sw = -(-h // s), -(-w // s)
-    # padded to whole cells, so that area averaging takes OpenCV's integer-factor path
-    padded = cv2.copyMakeBorder(image, 0, sh * s - h, 0, sw * s - w, cv2.BORDER_REPLICATE)
-    small = cv2.resize(padded, (sw, sh), interpolation=cv2.INTER_AREA)
+    # whole cells by area averaging (OpenCV's integer-factor path); a last partial row or
+    # column of cells takes its neighbour's value
+    fh, fw = max(h // s, 1), max(w // s, 1)
+    whole = image[: min(fh * s, h), : min(fw * s, w)]
+    if s % 2 == 0 and s > 2:  # halving first takes OpenCV's fast 2x path (~2x faster overall)
+        whole = cv2.resize(whole, (fw * s // 2, fh * s // 2), interpolation=cv2.INTER_AREA)
+    small = cv2.resize(whole, (fw, fh), interpolation=cv2.INTER_AREA)
+    small = cv2.copyMakeBorder(small, 0, sh - fh, 0, sw - fw, cv2.BORDER_REPLICATE)
     valid = cv2.copyMakeBorder(usable, 0, sh * s - h, 0, sw * s - w, cv2.BORDER_CONSTANT, value=0)
     valid = np.ascontiguousarray(valid[s // 2 :: s, s // 2 :: s])  # a cell's centre pixel
     outlier = np.zeros((sh, sw), np.uint8)
-    for ksize in (_WIDE_MEDIAN_CELLS, 5):  # big colonies first, then the fine detail
-        ksize = min(ksize, 2 * ((min(sh, sw) - 1) // 2) + 1)  # an odd size the grid holds
-        med = cv2.medianBlur(small, ksize) if ksize > 1 else small
+    # the wide median on cells twice as large (the same ~25 mm, a quarter of the work)
+    half = cv2.resize(small, (max(sw // 2, 1), max(sh // 2, 1)), interpolation=cv2.INTER_AREA)
+    for grid, ksize in ((half, _WIDE_MEDIAN_CELLS // 2), (small, 5)):
+        ksize = min(ksize | 1, 2 * ((min(grid.shape[:2]) - 1) // 2) + 1)  # odd, inside the grid
+        med = cv2.medianBlur(grid, ksize) if ksize > 1 else grid
+        if grid is half:
+            med = cv2.resize(med, (sw, sh), interpolation=cv2.INTER_NEAREST)
         off_median = cv2.transform(cv2.LUT(cv2.absdiff(small, med), _SQUARES), _ONES_3)
         outlier |= cv2.compare(off_median, threshold * 0.5, cv2.CMP_GT)
     outlier = cv2.dilate(outlier, np.ones((3, 3), np.uint8))
