@@ -73,6 +73,7 @@ from labauto.vision.plate_background import (
     deviation,
     hysteresis,
     local_background,
+    with_radial_rim,
 )
 from labauto.vision.plate_scale import WorkingCopy, image_scale, pixel_params, working_copy
 from labauto.vision.shape_angle import shape_angles
@@ -171,6 +172,10 @@ class PlateParams:
     valley_ratio : float
         Distance-transform dip between two peaks, relative to the lower peak, that separates two
         colonies of a merged body.
+    rim_band_mm : float
+        Width of the band inside the agar's edge whose background follows the dish's radial
+        profile (the meniscus; see :func:`labauto.vision.plate_background.with_radial_rim`);
+        0 turns it off.
     reject_ink : bool
         Drop dark bodies whose colour change is that of black or blue ink (labels; see
         :func:`_ink`). Turn off for plates whose colonies are dark grey or blue.
@@ -210,6 +215,7 @@ class PlateParams:
     mix_fraction: float = 0.06
     valley_ratio: float = 0.9
     reject_ink: bool = True
+    rim_band_mm: float = 6.0
     detector: DetectorParams = field(default_factory=lambda: DetectorParams(method="color"))
 
     def __post_init__(self) -> None:
@@ -226,6 +232,7 @@ class PlateParams:
             "des_threshold_deg",
             "mix_residual",
             "edge_skip_mm",
+            "rim_band_mm",
         )
         for name in non_negative:
             value = getattr(self, name)
@@ -417,11 +424,12 @@ def _dish_of(img: np.ndarray, params: PlateParams) -> tuple[Dish, np.ndarray | N
 
 def prepare_plate(
     img: np.ndarray, params: PlateParams
-) -> tuple[Dish, WorkingCopy, PlateParams, tuple[int, int], np.ndarray]:
-    """Dish, working copy, pixel-resolved params, ROI origin and usable mask of a plate image.
+) -> tuple[Dish, WorkingCopy, PlateParams, tuple[int, int], np.ndarray, Circle | None]:
+    """Dish, working copy, pixel-resolved params, ROI origin, usable mask and rim of a plate.
 
-    The dish is in the original image's pixels; the ROI origin ``(x0, y0)`` and the usable mask
-    are in the working copy's (see :mod:`labauto.vision.plate_scale`).
+    The dish is in the original image's pixels; the ROI origin ``(x0, y0)``, the usable mask
+    and the rim (the usable circle ``(cx, cy, r)`` in ROI pixels; None for a polygon) are in
+    the working copy's (see :mod:`labauto.vision.plate_scale`).
     """
     dish, polygon = _dish_of(img, params)
     px_per_mm = image_scale(dish.radius, params)
@@ -437,7 +445,10 @@ def prepare_plate(
     (wcx, wcy), wr = copy.to_working(dish.center), dish.radius * copy.factor
     work_poly = None if polygon is None else copy.to_working(polygon)
     (x0, y0, _, _), usable = _usable_area(copy.image, Dish((wcx, wcy), wr), work_poly, params)
-    return dish, copy, params, (x0, y0), usable
+    rim = None
+    if polygon is None:
+        rim = (wcx - x0, wcy - y0, wr - float(params.rim_margin_px or 0.0))
+    return dish, copy, params, (x0, y0), usable, rim
 
 
 def _usable_area(
@@ -494,9 +505,16 @@ def _deviation(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> np.n
     return deviation(roi, _background(roi, usable, params), params.channel_weights)
 
 
-def _background(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> np.ndarray:
+def _background(
+    roi: np.ndarray, usable: np.ndarray, params: PlateParams, rim: Circle | None = None
+) -> np.ndarray:
     """The agar's local colour (:func:`labauto.vision.plate_background.local_background`)."""
-    return local_background(roi, usable, int(params.background_scale or 1), params.color_threshold)
+    cell = int(params.background_scale or 1)
+    bg = local_background(roi, usable, cell, params.color_threshold)
+    if rim is not None and params.rim_band_mm > 0:
+        band = params.rim_band_mm * float(params.px_per_mm or 1.0)
+        bg = with_radial_rim(roi, bg, rim, band)
+    return bg
 
 
 def _gradients(dev: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -872,11 +890,11 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
         stage_ms[name] = (now - t_stage) * 1000.0
         t_stage = now
 
-    dish, copy, params, (x0, y0), usable = prepare_plate(img, params)
+    dish, copy, params, (x0, y0), usable, rim = prepare_plate(img, params)
     roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
     stage_done("dish")
 
-    background = _background(roi, usable, params)
+    background = _background(roi, usable, params, rim)
     if params.method == "detector":
         objects = _objects_by_detector(roi, usable, params)
     else:

@@ -24,6 +24,8 @@ know in advance. Choices made here:
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 
@@ -140,3 +142,52 @@ def hysteresis(dev: np.ndarray, usable: np.ndarray, high: float, low: float) -> 
     keep[np.unique(strong)] = 255
     keep[0] = 0
     return keep[labels]
+
+
+_RIM_SECTORS = 36  # sectors of 10 degrees: the radial profile is a median over each
+
+
+def with_radial_rim(
+    image: np.ndarray, background: np.ndarray, rim: tuple[float, float, float], band_px: float
+) -> np.ndarray:
+    """``background`` with its outer band replaced by the dish's own radial profile.
+
+    Near the wall the agar's colour changes within a millimetre or two (the meniscus: a bright
+    or dark ring), faster than the cell estimate can follow; eq. 1 then sees the ring as one
+    body that swallows every colony touching it. The meniscus is (nearly) the same all round,
+    so the dish is unwrapped to polar coordinates (``cv2.warpPolar``, 1 px per radius step,
+    1440 angles) and, in each 10-degree sector, the median over the angles at every radius is
+    the background there: colonies cover far less than half of a sector's arc at any radius.
+    Sector medians are interpolated between sector centres (cyclically), wrapped back, and
+    blended in over the outer ``band_px`` of the circle ``rim = (cx, cy, r)`` (full weight in
+    the outer two thirds of the band, ramping over its inner third).
+    """
+    h, w = background.shape[:2]
+    cx, cy, r = rim
+    r_max = r + 2.0
+    n_r, n_t = max(math.ceil(r_max), 2), 1440
+    polar = cv2.warpPolar(
+        image, (n_r, n_t), (cx, cy), r_max, cv2.WARP_POLAR_LINEAR | cv2.INTER_LINEAR
+    )
+    r0 = max(int(r - band_px) - 2, 0)
+    band = polar[:, r0:]
+    per = n_t // _RIM_SECTORS
+    medians = np.median(band.reshape(_RIM_SECTORS, per, band.shape[1], 3), axis=1)
+    # interpolate between sector centres, cyclically, back to every angle
+    ring = np.concatenate((medians[-1:], medians, medians[:1])).astype(np.float32)
+    profile = cv2.resize(
+        ring, (band.shape[1], (_RIM_SECTORS + 2) * per), interpolation=cv2.INTER_LINEAR
+    )
+    profile = profile[per : per + n_t]
+    full = np.zeros((n_t, n_r, 3), np.float32)
+    full[:, r0:] = profile
+    radial = cv2.warpPolar(
+        full, (w, h), (cx, cy), r_max,
+        cv2.WARP_POLAR_LINEAR | cv2.WARP_INVERSE_MAP | cv2.INTER_LINEAR,
+    )  # fmt: skip
+    ys, xs = np.ogrid[:h, :w]
+    dist = np.sqrt((xs - cx) ** 2 + (ys - cy) ** 2, dtype=np.float32)
+    weight = np.clip((dist - (r - band_px)) / max(band_px / 3.0, 1.0), 0.0, 1.0)[..., None]
+    radial = np.nan_to_num(radial, copy=False)
+    out = background.astype(np.float32) * (1.0 - weight) + radial * weight
+    return cv2.convertScaleAbs(out)

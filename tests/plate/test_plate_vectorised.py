@@ -102,7 +102,7 @@ def stages(plates: list) -> list[tuple]:
     """For three plates: the ROI, contours, foreground, D_alpha test and measured bodies."""
     out = []
     for img, _ in plates[:3]:
-        _, copy, params, (x0, y0), usable = plate_module.prepare_plate(img, PlateParams())
+        _, copy, params, (x0, y0), usable, _ = plate_module.prepare_plate(img, PlateParams())
         roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
         contours, d_alpha, inside, _, rejected, fg = plate_module._objects_by_segmentation(
             roi, usable, params, plate_module._background(roi, usable, params)
@@ -148,7 +148,7 @@ def test_vectorised_mix_scores_and_merged_counts_equal_per_body(stages: list) ->
 
 def test_unit_weight_deviation_equals_the_weighted_formula(plates: list) -> None:
     img, _ = plates[4]
-    _, copy, params, (x0, y0), usable = plate_module.prepare_plate(img, PlateParams())
+    _, copy, params, (x0, y0), usable, _ = plate_module.prepare_plate(img, PlateParams())
     roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
     fast = plate_module._deviation(roi, usable, params)
     general = plate_module._deviation(roi, usable, replace(params, channel_weights=[1.0, 1.0, 1.0]))
