@@ -476,6 +476,10 @@ def generate_plate(
     n_mixed: int = 4,
     artefacts: bool = True,
     noise_sigma: float = 2.5,
+    colony_scale: float = 1.0,
+    faint_fraction: float = 0.0,
+    n_meniscus: int = 0,
+    lid_label: bool = False,
 ) -> tuple[np.ndarray, PlateTruth]:
     """Render a synthetic petri dish and its ground truth.
 
@@ -496,6 +500,18 @@ def generate_plate(
         Draw dust, scratches, pen marks, labels and glare.
     noise_sigma : float
         Standard deviation of the sensor noise in grey levels.
+    colony_scale : float
+        Colony sizes relative to the default 9-24 px radius (at 1024 px); with a large
+        ``n_authentic`` this makes a crowded plate (e.g. 0.3 and 1000 colonies).
+    faint_fraction : float
+        Share of the authentic colonies drawn faint and translucent: a quarter of their colour's
+        difference from the agar (a few grey levels of contrast, as on real pale agar).
+    n_meniscus : int
+        Authentic colonies drawn touching the meniscus (their centre half a radius inside the
+        agar's edge, cut by it).
+    lid_label : bool
+        A printed label across the lid: rows of dark dot-matrix characters over the agar and
+        over colonies (the artefact ``"lid-label"``; colonies under it stay in the truth).
 
     Returns
     -------
@@ -514,6 +530,11 @@ def generate_plate(
     for name, n in (("n_authentic", n_authentic), ("n_merged", n_merged), ("n_mixed", n_mixed)):
         if n < 0:
             raise ValueError(f"{name} must be >= 0, got {n}")
+    if not colony_scale > 0 or not 0 <= faint_fraction <= 1 or n_meniscus < 0:
+        raise ValueError(
+            f"colony_scale must be > 0, faint_fraction in [0, 1] and n_meniscus >= 0, got "
+            f"{colony_scale}, {faint_fraction}, {n_meniscus}"
+        )
     rng = np.random.default_rng(seed)
     if agar is None:
         agar = sorted(AGAR_COLOURS_RGB)[int(rng.integers(len(AGAR_COLOURS_RGB)))]
@@ -559,7 +580,9 @@ def generate_plate(
     margin = 36.0 * k
     placer = _Placer(rng, cx, cy, radius - margin, 8.0 * k)
     colonies: list[ColonyTruth] = []
-    size_lo, size_hi = 9.0 * k, 24.0 * k
+    size_lo, size_hi = 9.0 * k * colony_scale, 24.0 * k * colony_scale
+    if colony_scale != 1.0:
+        placer.gap = 8.0 * k * min(colony_scale, 1.0)
 
     # Merged groups first (they need the most room) -------------------------------------------
     merged_members: list[list[_Des]] = []
@@ -583,7 +606,7 @@ def generate_plate(
     singles: list[tuple[str, _Des]] = []
     for kind, n in (("mixed", n_mixed), ("authentic", n_authentic)):
         for _ in range(n):
-            lo = max(size_lo, 13.0 * k) if kind == "mixed" else size_lo
+            lo = max(size_lo, 13.0 * k * colony_scale) if kind == "mixed" else size_lo
             des = _random_des(rng, 0.0, 0.0, float(rng.uniform(lo, size_hi)))
             pos = placer.sample(des.bound + 1.5)
             if pos is None:
@@ -604,9 +627,27 @@ def generate_plate(
         cover |= body_cover
         colonies.append(_truth_from_mask(len(colonies), "merged", body_cover, members, colours))
 
+    for _ in range(n_meniscus):  # touching the meniscus: centre half a radius inside the edge
+        des = _random_des(rng, 0.0, 0.0, float(rng.uniform(size_lo, size_hi)))
+        for _try in range(200):
+            th = rng.uniform(0.0, 2.0 * np.pi)
+            rr = radius - 0.5 * min(des.a, des.b)
+            x, y = cx + rr * math.cos(th), cy + rr * math.sin(th)
+            gap_ok = all(
+                math.hypot(x - px, y - py) >= des.bound + pr + placer.gap
+                for px, py, pr in placer.discs
+            )
+            if gap_ok:
+                placer.add(x, y, des.bound + 1.5)
+                singles.append(("authentic", _Des(x, y, des.a, des.b, des.angle, des.coeffs)))
+                break
+
     for kind, des in singles:
         near = kind == "authentic" and rng.uniform() < 0.2
         colour = _pick_colour(rng, agar_rgb, near_agar=near)
+        if kind == "authentic" and faint_fraction > 0 and rng.uniform() < faint_fraction:
+            colour = agar_rgb + 0.25 * (colour - agar_rgb)  # faint and translucent
+            near = True
         style = ""
         if kind == "mixed":
             second = _pick_second_species(rng, agar_rgb, colour)
@@ -617,6 +658,7 @@ def generate_plate(
             colours = [colour]
         body_cover = np.zeros_like(cover)
         _draw_des(canvas, body_cover, des, colour_of, rng)
+        body_cover &= dist < radius  # a colony at the meniscus is cut by the agar's edge
         cover |= body_cover
         truth = _truth_from_mask(len(colonies), kind, body_cover, [des], colours, style, near)
         colonies.append(truth)
@@ -625,6 +667,9 @@ def generate_plate(
     arts: list[ArtefactTruth] = []
     if artefacts:
         arts = _draw_artefacts(canvas, rng, placer, cx, cy, radius, rim, agar_rgb, k)
+
+    if lid_label:
+        arts.append(_draw_lid_label(canvas, rng, cx, cy, radius, k))
 
     # Lighting, blur, noise -------------------------------------------------------------------
     phi = rng.uniform(0, 2 * np.pi)
@@ -647,6 +692,39 @@ def generate_plate(
         artefacts=arts,
     )
     return image, truth
+
+
+def _draw_lid_label(
+    canvas: np.ndarray, rng: np.random.Generator, cx: float, cy: float, radius: float, k: float
+) -> ArtefactTruth:
+    """A printed lid label across the dish: 3 rows of dot-matrix "characters", blue-black ink.
+
+    Each character is a 5x7 grid of dots (0.35 mm, about 3.5 px at 1024 px) of which about half
+    are inked, 1.2 dot pitches apart; rows run across the middle of the dish at a random angle.
+    The ink takes ~55 % of the light (a bit less of the blue), as real printed lids do.
+    """
+    angle = rng.uniform(0.0, np.pi)
+    u = np.array([math.cos(angle), math.sin(angle)])
+    v = np.array([-u[1], u[0]])
+    pitch = 4.2 * k
+    dot_r = 1.7 * k
+    ink = np.zeros(canvas.shape[:2], np.float32)
+    points = []
+    length = 1.2 * radius
+    for row in range(3):
+        base = np.array([cx, cy]) - u * length / 2 + v * (row - 1) * 10 * pitch
+        for char in range(int(length / (6 * pitch))):
+            bits = rng.uniform(size=(7, 5)) < 0.5
+            for gy, gx in zip(*np.nonzero(bits), strict=True):
+                p = base + u * (char * 6 + gx) * pitch + v * gy * pitch
+                cv2.circle(ink, (round(p[0] * 4), round(p[1] * 4)), round(dot_r * 4), 1.0, -1,
+                           cv2.LINE_AA, 2)  # fmt: skip
+                points.append(p)
+    ink = np.clip(ink, 0, 1)[..., None] * np.array([0.58, 0.55, 0.45], np.float32)
+    canvas *= 1.0 - ink
+    pts = np.array(points, float)
+    hull = cv2.convexHull(pts.astype(np.float32)).reshape(-1, 2).astype(float)
+    return ArtefactTruth("lid-label", hull, True)
 
 
 def _radius_towards(des: _Des, heading: float) -> float:
@@ -985,7 +1063,7 @@ def score_plate(truth: PlateTruth, colonies: list[Any]) -> PlateScore:
             for a in truth.artefacts:
                 pts = a.points.reshape(-1, 2)
                 if np.min(np.hypot(pts[:, 0] - x, pts[:, 1] - y)) < 25.0 or (
-                    a.kind == "label"
+                    a.kind in ("label", "lid-label")
                     and cv2.pointPolygonTest(
                         pts.astype(np.float32).reshape(-1, 1, 2), (x, y), False
                     )

@@ -75,6 +75,7 @@ from labauto.vision.plate_background import (
     local_background,
     with_radial_rim,
 )
+from labauto.vision.plate_ink import ink_bodies
 from labauto.vision.plate_scale import WorkingCopy, image_scale, pixel_params, working_copy
 from labauto.vision.shape_angle import shape_angles
 
@@ -177,8 +178,8 @@ class PlateParams:
         profile (the meniscus; see :func:`labauto.vision.plate_background.with_radial_rim`);
         0 turns it off.
     reject_ink : bool
-        Drop dark bodies whose colour change is that of black or blue ink (labels; see
-        :func:`_ink`). Turn off for plates whose colonies are dark grey or blue.
+        Drop bodies of black or blue ink (labels; see :mod:`labauto.vision.plate_ink`).
+        Turn off for plates whose colonies are dark grey or blue.
     detector : DetectorParams
         Parameters passed to the generic detector when ``method == "detector"``.
     """
@@ -686,40 +687,6 @@ def _measure_bodies(
     )
 
 
-_INK_DARKER = -0.10  # a body this much darker than the agar (mean relative change) ...
-_INK_BLUE_MARGIN = -0.01  # ... whose blue darkens by no more than its red (relatively) is ink
-_INK_FILL = 3.5  # ... when it is also a stroke: area over this many of its inscribed discs
-_INK_STROKE_MM = 1.6  # ... or narrower than this (mm) and longer than two such discs
-
-
-def _ink(
-    roi: np.ndarray, background: np.ndarray, bodies: _Bodies, which: np.ndarray
-) -> np.ndarray:
-    """True for the bodies (where ``which`` is true) of printed or written ink (labels).
-
-    Ink on the lid or the dish's bottom is black or blue: it takes away a like share of every
-    channel of the agar seen through it (black) or more of red than of blue (blue ink). The
-    colonies of the real plates we measured (cream, yellow, brown, olive) take away more blue
-    than red: pigments and turbid cell masses absorb short wavelengths first. So a body is ink
-    when it is darker than the agar by at least 10 % (mean relative change over B, G, R) and its
-    relative change in blue is no more negative than in red, less 1 %. Choice and limit: a dark
-    grey or blue colony (rare; some chromogenic media) reads as ink, so
-    ``PlateParams.reject_ink`` turns the test off.
-    """
-    out = np.zeros(len(bodies.index), bool)
-    for b in np.flatnonzero(which).tolist():
-        t, lft, h, w, r = (int(v[b]) for v in (bodies.top, bodies.left, bodies.height,
-                                                 bodies.width, bodies.row))  # fmt: skip
-        inside = bodies.mask[r : r + h, :w] > 0
-        if not inside.any():
-            continue
-        colour = roi[t : t + h, lft : lft + w][inside].mean(axis=0)
-        agar = np.maximum(background[t : t + h, lft : lft + w][inside].mean(axis=0), 1.0)
-        rel = colour / agar - 1.0  # B, G, R
-        out[b] = rel.mean() <= _INK_DARKER and rel[0] - rel[2] >= _INK_BLUE_MARGIN
-    return out
-
-
 def _mix_scores(
     roi: np.ndarray, bodies: _Bodies, which: np.ndarray, params: PlateParams
 ) -> np.ndarray:
@@ -906,12 +873,7 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     des_shape = np.asarray(inside, bool) & (np.asarray(d_alpha) < params.des_threshold_deg)
     bodies = _measure_bodies(contours, fg, des_shape, params, rejected)
     if params.reject_ink:
-        # ink colour, and a stroke's shape: much larger than its inscribed disc, or thin (a
-        # pen or dot-matrix stroke) and larger than two such discs
-        fill = bodies.area / np.maximum(math.pi * bodies.r_in**2, 1.0)
-        thin = bodies.r_in < _INK_STROKE_MM / 2 * float(params.px_per_mm or 0.0)
-        strokelike = (fill > _INK_FILL) | (thin & (fill > 2.0))
-        ink = _ink(roi, background, bodies, strokelike & ~bodies.stroke)
+        ink = ink_bodies(roi, background, bodies, ~bodies.stroke, float(params.px_per_mm or 0.0))
         if ink.any():
             rejected["ink"] = int(ink.sum())
             bodies.stroke |= ink

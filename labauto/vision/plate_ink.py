@@ -1,0 +1,74 @@
+"""Printed and written ink (labels on the lid or the dish's bottom) among the bodies on a plate.
+
+Plate photos show the lid's printed label (often dot-matrix: lot, date, medium) and the lab's
+handwriting across the agar. Eq. 1 sees every stroke and dot cluster as a body; the shape tests
+catch long strokes, not the compact clusters of a dot-matrix character. Ink differs from the
+colonies of the real plates we measured (cream, yellow, brown, olive, white) in colour:
+
+* **Colour.** Black ink takes away a like share of every channel of the agar seen through it,
+  blue ink more of red than of blue. Pigmented and turbid colonies take away more blue than red
+  (short wavelengths first). A body is ink-coloured when it is darker than its agar by at least
+  10 % (mean relative change over B, G, R) and its relative change in blue is no more negative
+  than in red, less 1 %.
+* **Shape or texture.** An ink-coloured body is ink when it is also a stroke (its area over 3.5
+  inscribed discs; or narrower than 1.6 mm and over two discs; or narrower than 1 mm, a dot or
+  a pen line) or dotted: fewer than 75 % of its pixels take at least half its mean darkening
+  (the agar between printed dots; a colony is dark all over, dome shading included).
+
+Limit: a dark grey or blue colony (some chromogenic media) that is small or stroke-shaped
+reads as ink; ``PlateParams.reject_ink`` turns the test off for such plates.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+INK_DARKER = -0.10  # least mean relative darkening of an ink body
+INK_BLUE_MARGIN = -0.01  # ink's relative change in blue minus that in red is at least this
+INK_FILL = 3.5  # a stroke: area over this many inscribed discs ...
+INK_STROKE_MM = 1.6  # ... or narrower than this and over two discs ...
+INK_DOT_MM = 1.0  # ... or narrower than this, whatever its shape
+INK_SOLID = 0.75  # a dotted body has fewer of its pixels this dark (relative to its mean)
+
+
+def ink_bodies(
+    roi: np.ndarray, background: np.ndarray, bodies: Any, which: np.ndarray, px_per_mm: float
+) -> np.ndarray:
+    """True for the bodies (where ``which`` is true) that are printed or written ink.
+
+    Parameters
+    ----------
+    roi, background : ndarray
+        The plate's BGR pixels and the agar's colour behind them (same shape).
+    bodies : labauto.vision.plate._Bodies
+        The measured bodies (crops on a shared canvas: ``top``, ``left``, ``height``,
+        ``width``, ``row``, ``mask``, ``area``, ``r_in``).
+    which : ndarray of bool
+        Bodies to test.
+    px_per_mm : float
+        Pixels per millimetre of ``roi``.
+    """
+    out = np.zeros(len(bodies.index), bool)
+    fill = bodies.area / np.maximum(math.pi * bodies.r_in**2, 1.0)
+    thin = bodies.r_in < INK_STROKE_MM / 2 * px_per_mm
+    dot = bodies.r_in < INK_DOT_MM / 2 * px_per_mm
+    strokelike = (fill > INK_FILL) | (thin & (fill > 2.0)) | dot
+    for b in np.flatnonzero(which).tolist():
+        t, lft, h, w, r = (int(v[b]) for v in (bodies.top, bodies.left, bodies.height,
+                                                 bodies.width, bodies.row))  # fmt: skip
+        inside = bodies.mask[r : r + h, :w] > 0
+        if not inside.any():
+            continue
+        colour = roi[t : t + h, lft : lft + w][inside].astype(np.float32)
+        agar = np.maximum(background[t : t + h, lft : lft + w][inside].astype(np.float32), 1.0)
+        rel = colour / agar - 1.0  # per pixel: B, G, R
+        mean = rel.mean(axis=0)
+        if not (mean.mean() <= INK_DARKER and mean[0] - mean[2] >= INK_BLUE_MARGIN):
+            continue
+        darkening = -rel.mean(axis=1)
+        dotted = np.mean(darkening >= 0.5 * -mean.mean()) < INK_SOLID
+        out[b] = bool(strokelike[b] or dotted)
+    return out
