@@ -177,6 +177,10 @@ class PlateParams:
         Width of the band inside the agar's edge whose background follows the dish's radial
         profile (the meniscus; see :func:`labauto.vision.plate_background.with_radial_rim`);
         0 turns it off.
+    drop_at_border : bool
+        Drop bodies within 3 px of the usable area's border (cut by it). False (default): a
+        colony at the meniscus is found and counted; picking keeps its own distance from the
+        rim (``picking.min_rim_distance_px``).
     reject_ink : bool
         Drop bodies of black or blue ink (labels; see :mod:`labauto.vision.plate_ink`).
         Turn off for plates whose colonies are dark grey or blue.
@@ -216,6 +220,7 @@ class PlateParams:
     mix_fraction: float = 0.06
     valley_ratio: float = 0.9
     reject_ink: bool = True
+    drop_at_border: bool = False
     rim_band_mm: float = 6.0
     detector: DetectorParams = field(default_factory=lambda: DetectorParams(method="color"))
 
@@ -859,6 +864,14 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
 
     dish, copy, params, (x0, y0), usable, rim = prepare_plate(img, params)
     roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
+    if not params.drop_at_border:
+        # a margin of _PAD px all round, so that bodies touching the usable area's border
+        # (colonies at the meniscus) still have whole crops
+        roi = cv2.copyMakeBorder(roi, _PAD, _PAD, _PAD, _PAD, cv2.BORDER_REPLICATE)
+        usable = cv2.copyMakeBorder(usable, _PAD, _PAD, _PAD, _PAD, cv2.BORDER_CONSTANT, value=0)
+        x0, y0 = x0 - _PAD, y0 - _PAD
+        if rim is not None:
+            rim = (rim[0] + _PAD, rim[1] + _PAD, rim[2])
     stage_done("dish")
 
     background = _background(roi, usable, params, rim)
@@ -953,7 +966,9 @@ def _objects_by_segmentation(
     rejected = {"dust": len(found) - len(candidates), "rim": 0}
     if not candidates:
         return [], np.zeros(0), np.zeros(0, bool), np.zeros((0, 2)), rejected, fg
-    at_rim = _at_rim(usable, candidates)
+    at_rim = np.zeros(len(candidates), bool)
+    if params.drop_at_border:
+        at_rim = _at_rim(usable, candidates)
     kept = [c for c, rim in zip(candidates, at_rim.tolist(), strict=True) if not rim]
     rejected["rim"] = len(candidates) - len(kept)
     if not kept:

@@ -102,7 +102,10 @@ def stages(plates: list) -> list[tuple]:
     """For three plates: the ROI, contours, foreground, D_alpha test and measured bodies."""
     out = []
     for img, _ in plates[:3]:
-        _, copy, params, (x0, y0), usable, _ = plate_module.prepare_plate(img, PlateParams())
+        # bodies at the usable border dropped: the crops then fit without the analysis' margin
+        _, copy, params, (x0, y0), usable, _ = plate_module.prepare_plate(
+            img, PlateParams(drop_at_border=True)
+        )
         roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
         contours, d_alpha, inside, _, rejected, fg = plate_module._objects_by_segmentation(
             roi, usable, params, plate_module._background(roi, usable, params)
