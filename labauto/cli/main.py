@@ -58,12 +58,27 @@ def main(argv: list[str] | None = None) -> int:
     except (LabautoError, DeviceError, ValueError, OSError) as exc:
         if debug:
             raise
-        click.echo(f"labauto: error: {exc}", err=True)
+        click.echo(f"labauto: error: {_one_line(str(exc))}", err=True)
         return 1
     except KeyboardInterrupt:
         click.echo("labauto: interrupted", err=True)
         return 130
+    except Exception as exc:  # cv2.error, RecursionError, MemoryError, OverflowError, ...
+        if debug:
+            raise
+        click.echo(
+            f"labauto: error: {type(exc).__name__}: {_one_line(str(exc))} "
+            "(labauto --debug shows the traceback)",
+            err=True,
+        )
+        return 1
     return 0
+
+
+def _one_line(text: str, limit: int = 500) -> str:
+    """The message on one line, at most ``limit`` characters (e.g. cv2.error spans lines)."""
+    line = " ".join(text.split()) or "(no message)"
+    return line if len(line) <= limit else line[: limit - 3] + "..."
 
 
 if __name__ == "__main__":
