@@ -81,9 +81,7 @@ def test_a_crash_after_any_commit_is_resumed_to_the_same_picks(tmp_path, plugins
         assert integrity_problems(db) == [], f"boundary {boundary}"
         flagged = {pick for (pick,) in in_flight + delivered}
         unknown = {
-            pick
-            for (pick,) in query(db, "select id from picks where state = 'unknown'")
-            if pick
+            pick for (pick,) in query(db, "select id from picks where state = 'unknown'") if pick
         }
         assert unknown == flagged, f"boundary {boundary}: unknown {unknown} != {flagged}"
         final = query(db, "select state from runs where id = 1")[0][0]
@@ -176,5 +174,7 @@ def test_real_sigkills_at_varied_moments_lose_nothing_and_repeat_nothing(tmp_pat
     takeovers = query(db, "select message from events where kind = 'run.lease'")
     assert len(takeovers) >= 1 and all("its process is gone" in m for (m,) in takeovers)
     resumes = query(db, "select count(*) from events where kind = 'run.resumed'")[0][0]
-    print(f"\nSIGKILL chain: {kills} kills, {runs} processes, {resumes} resumes, "
-          f"{analyzed} analysed, {unknown} flagged unknown, 0 repeated")
+    print(
+        f"\nSIGKILL chain: {kills} kills, {runs} processes, {resumes} resumes, "
+        f"{analyzed} analysed, {unknown} flagged unknown, 0 repeated"
+    )
