@@ -49,6 +49,8 @@ def main(argv: list[str] | None = None) -> int:
         cli.main(args=args, prog_name="labauto", standalone_mode=False)
     except click.exceptions.Exit as exc:
         return exc.exit_code
+    except SystemExit as exc:  # a command's own exit status (e.g. 3: completed with errors)
+        return exc.code if isinstance(exc.code, int) else 1
     except click.ClickException as exc:
         exc.show()
         return exc.exit_code

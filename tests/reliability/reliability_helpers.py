@@ -173,3 +173,15 @@ def labauto(*args: str, cwd: Path, env: dict[str, str] | None = None) -> subproc
         text=True,
         env={**os.environ, **(env or {})},
     )
+
+
+class Trigger:
+    """A reporter that runs ``action`` once, at the first event of kind ``kind``."""
+
+    def __init__(self, kind: str, action: Any) -> None:
+        self.kind, self.action, self.fired = kind, action, False
+
+    def on_event(self, kind: str, message: str, data: dict[str, Any]) -> None:
+        if not self.fired and kind == self.kind:
+            self.fired = True
+            self.action()
