@@ -51,8 +51,12 @@ def main(argv: list[str] | None = None) -> int:
         return exc.exit_code
     except SystemExit as exc:  # a command's own exit status (e.g. 3: completed with errors)
         return exc.code if isinstance(exc.code, int) else 1
+    except click.UsageError as exc:  # one line too, with where to find help
+        where = f" (see {exc.ctx.command_path} --help)" if exc.ctx is not None else ""
+        click.echo(f"labauto: error: {_one_line(exc.format_message())}{where}", err=True)
+        return exc.exit_code
     except click.ClickException as exc:
-        exc.show()
+        click.echo(f"labauto: error: {_one_line(exc.format_message())}", err=True)
         return exc.exit_code
     except click.exceptions.Abort:
         click.echo("labauto: aborted", err=True)
@@ -68,9 +72,11 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # cv2.error, RecursionError, MemoryError, OverflowError, ...
         if debug:
             raise
+        kind = type(exc).__name__
+        if type(exc).__module__ not in ("builtins", None):
+            kind = f"{type(exc).__module__.split('.')[0]}.{kind}"  # e.g. cv2.error
         click.echo(
-            f"labauto: error: {type(exc).__name__}: {_one_line(str(exc))} "
-            "(labauto --debug shows the traceback)",
+            f"labauto: error: {kind}: {_one_line(str(exc))} (labauto --debug shows the traceback)",
             err=True,
         )
         return 1
