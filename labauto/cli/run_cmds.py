@@ -73,7 +73,13 @@ def run_cmd(config: Config, force_new: bool, resume_id: int | None, as_json: boo
     with open_run(
         config, store, resume_id=resume_id, force_new=force_new, reporter=progress
     ) as session:
-        progress.start(session.run_id, session.resumed)
+        picks = store.run_summary(session.run_id).picks_by_state
+        progress.start(
+            session.run_id,
+            session.resumed,
+            planned=sum(picks.values()),
+            done=sum(n for state, n in picks.items() if state != "planned"),
+        )
         previous = _install_signal_handlers(session.control)
         try:
             outcome = session.execute()

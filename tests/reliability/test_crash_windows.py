@@ -130,13 +130,13 @@ def test_real_sigkills_at_varied_moments_lose_nothing_and_repeat_nothing(tmp_pat
         tmp_path,
         plates=2,
         picking={"max_picks": 2},
-        robot={"simulator": {"speed_factor": 50.0}},
+        robot={"simulator": {"speed_factor": 100.0}},
         analyzer={"simulator": {"speed_factor": 4.0, "analysis_seconds": 1.0}},
     )
     config_file = write_config(config, tmp_path / "run.yaml")
     db = db_path(config)
     # seconds after each (re)started process set the run running: devices, plates, picks
-    delays = [0.05, 0.3, 0.6, 0.9, 1.2, 1.5]
+    delays = [0.05, 0.35, 0.65, 0.95, 1.25]
     kills, runs, last = 0, 0, None
     while True:
         runs += 1

@@ -185,3 +185,26 @@ def test_one_serial_port_is_driven_by_one_run_at_a_time(tmp_path, plugins):
             assert session.execute().state == "succeeded"
     finally:
         gantry.stop()
+
+
+def test_a_run_whose_lease_is_taken_over_stops_at_the_next_safe_point(tmp_path, plugins):
+    config = workcell_config(
+        tmp_path,
+        plates=2,
+        run={"heartbeat_s": 0.1, "lease_timeout_s": 0.5},
+        analyzer={"simulator": {"speed_factor": 2.0, "analysis_seconds": 1.0}},
+    )
+    store = Store.open(config.database.url)
+    intruder = LeaseOwner("intruder", 4243, "another-host.example")
+
+    def take_over() -> None:  # another process decides the lease is stale and takes it
+        store.take_lease(1, intruder, StaleCheck(timeout_s=0.5, is_dead=lambda pid, host: True))
+
+    from reliability_helpers import Trigger
+
+    with open_run(config, store, plugins=plugins, reporter=Trigger("pick.done", take_over)) as s:
+        outcome = s.execute()
+    assert outcome.state == "stopped"  # it did not go on driving the workcell
+    lost = [e.message for e in store.events(1, "run.lease")]
+    assert any("was taken over by pid 4243 on host another-host.example" in m for m in lost)
+    assert store.get_run(1).lease_pid == 4243  # the intruder keeps it; ours was not released
