@@ -204,6 +204,11 @@ def runs_show(run_id: int, config: Config, as_json: bool, n_events: int) -> None
         + (f" ({run['error']})" if run.get("error") else "")
     )
     click.echo(f"  started {run.get('started_at')}, finished {run.get('finished_at')}")
+    if run.get("lease_pid") is not None:
+        click.echo(
+            f"  owned by pid {run['lease_pid']} on host {run['lease_host']}, "
+            f"last heartbeat {run.get('lease_heartbeat_at')}"
+        )
     click.echo(f"  plates: {', '.join(report['plates']) or 'none'}")
     click.echo(f"  colonies: {_counts_text(report['colonies']) or 'none'}")
     click.echo(f"  picks: {_counts(report['picks_by_state'])}")

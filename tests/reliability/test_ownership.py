@@ -208,3 +208,14 @@ def test_a_run_whose_lease_is_taken_over_stops_at_the_next_safe_point(tmp_path, 
     lost = [e.message for e in store.events(1, "run.lease")]
     assert any("was taken over by pid 4243 on host another-host.example" in m for m in lost)
     assert store.get_run(1).lease_pid == 4243  # the intruder keeps it; ours was not released
+
+
+def test_runs_show_names_the_owner_of_a_leased_run(tmp_path, capsys):
+    from labauto.cli.main import main
+
+    config = workcell_config(tmp_path, plates=1)
+    store = Store.open(config.database.url)
+    store.create_run(config.name, lease=LeaseOwner("t", 4244, "bench-7"))
+    config_file = write_config(config, tmp_path / "c.yaml")
+    assert main(["runs", "show", "1", "--config", str(config_file)]) == 0
+    assert "owned by pid 4244 on host bench-7" in capsys.readouterr().out
