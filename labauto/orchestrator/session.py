@@ -246,8 +246,21 @@ def describe_run(store: Store, run_id: int, n_events: int = 15) -> dict[str, Any
 
 
 def check_devices(config: Config, plugins: Plugins | None = None) -> dict[str, dict[str, Any]]:
-    """Connect to the robot and analyzer and report who answered (``labauto devices check``)."""
+    """Connect to the robot and analyzer and report who answered (``labauto devices check``).
+
+    The real devices are locked first, so a check never talks to a device a run is driving.
+
+    Raises
+    ------
+    RunError
+        A device is in use by a run.
+    """
     plugins = plugins or load_plugins(config.plugins.enabled, config.plugins.disabled)
+    with device_locks(config, "labauto devices check"):
+        return _check_devices(config, plugins)
+
+
+def _check_devices(config: Config, plugins: Plugins) -> dict[str, dict[str, Any]]:
     report: dict[str, dict[str, Any]] = {}
     for kind, section in (("robot", config.robot), ("analyzer", config.analyzer)):
         device = None

@@ -28,7 +28,7 @@ from reliability_helpers import (
 
 from labauto.drivers.grbl_sim import SimulatedGantry
 from labauto.errors import RunError
-from labauto.orchestrator.session import open_run
+from labauto.orchestrator.session import check_devices, open_run
 from labauto.store import Store
 from labauto.store.leases import LeaseHeld, LeaseOwner, StaleCheck
 
@@ -179,6 +179,8 @@ def test_one_serial_port_is_driven_by_one_run_at_a_time(tmp_path, plugins):
             assert f"robot {os.path.realpath(port)} is in use by a run of config" in str(info.value)
             assert f"pid {os.getpid()}" in str(info.value)
             assert session.execute().state == "succeeded"
+            with pytest.raises(RunError, match="is in use by a run of config"):
+                check_devices(second, plugins)  # not even a check talks to a busy port
         assert store_b.list_runs() == []  # the refused run left nothing behind
         # released when the first run ended: the second can now use the port
         with open_run(second, store_b, plugins=plugins) as session:
