@@ -166,7 +166,12 @@ class GrblRobot:
     travel_feed, z_feed
         Feed rates (mm/min) for X/Y travel and for Z moves.
     motion_timeout
-        Seconds to wait for motion to finish (``G4 P0``, homing, tool outputs).
+        Seconds to wait for motion to finish (``G4 P0``, homing).
+    tool_timeout
+        Seconds to wait for the reply to a tool command (``M8``/``M9``). GRBL answers it once
+        the motion before it is done, so queued motion is waited for first (with
+        ``motion_timeout``) and a lost reply then costs ``tool_timeout``, not a whole
+        ``motion_timeout``. Default: ``timeout``.
     name
         Device name used in error messages and ``check()``.
     tool_on_command, tool_off_command
@@ -196,6 +201,7 @@ class GrblRobot:
         travel_feed: float = 3000.0,
         z_feed: float = 600.0,
         motion_timeout: float = 60.0,
+        tool_timeout: float | None = None,
         name: str = "robot",
         tool_on_command: str = "M8",
         tool_off_command: str = "M9",
@@ -211,6 +217,7 @@ class GrblRobot:
             ("travel_feed", travel_feed),
             ("z_feed", z_feed),
             ("motion_timeout", motion_timeout),
+            ("tool_timeout", timeout if tool_timeout is None else tool_timeout),
             ("poll_interval", poll_interval),
         ):
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
@@ -229,6 +236,8 @@ class GrblRobot:
         self.travel_feed = float(travel_feed)
         self.z_feed = float(z_feed)
         self.motion_timeout = float(motion_timeout)
+        self.tool_timeout = float(timeout if tool_timeout is None else tool_timeout)
+        self._motion_pending = False  # moves queued without waiting for them
         self.tool_on_command = tool_on_command.strip()
         self.tool_off_command = tool_off_command.strip()
         self.poll_interval = float(poll_interval)
@@ -465,6 +474,7 @@ class GrblRobot:
             lines.append(f"G21 G90 G53 G1 {format_axis_words(Z=target_z, F=self.z_feed)}")
         with self._io_lock:
             for line in lines:
+                self._motion_pending = True
                 self._command(line)
             return self.wait_idle() if wait else None
 
@@ -500,6 +510,7 @@ class GrblRobot:
             while True:
                 report = self.status()
                 if report.state in ("Idle", "Check"):
+                    self._motion_pending = False
                     return report
                 if report.is_alarm:
                     raise GrblAlarm(self._last_alarm, "stopped the machine", device=self.name)
@@ -519,12 +530,18 @@ class GrblRobot:
         self._command(f"G4 P{seconds:.3f}", timeout=self.motion_timeout + seconds)
 
     def tool_on(self) -> None:
-        """Switch the pick tool on (``tool_on_command``; GRBL first finishes queued motion)."""
-        self._command(self.tool_on_command, timeout=self.motion_timeout)
+        """Switch the pick tool on (``tool_on_command``), after any queued motion."""
+        self._tool(self.tool_on_command)
 
     def tool_off(self) -> None:
-        """Switch the pick tool off (``tool_off_command``)."""
-        self._command(self.tool_off_command, timeout=self.motion_timeout)
+        """Switch the pick tool off (``tool_off_command``), after any queued motion."""
+        self._tool(self.tool_off_command)
+
+    def _tool(self, line: str) -> None:
+        with self._io_lock:
+            if self._motion_pending:
+                self.wait_idle()
+            self._command(line, timeout=self.tool_timeout)
 
     def feed_hold(self) -> None:
         """Pause motion now (real-time ``!``); :meth:`resume` continues. Safe from any thread."""

@@ -6,6 +6,9 @@ with one line naming the file, the dotted key path and what was expected, for ex
 
     configs/x.yaml: robot.port: expected a string, got 3
 
+A config file is read with the guards of :mod:`labauto.safeyaml` (a regular file of at most
+1 MiB, no YAML aliases, bounded nesting); numbers must be finite (no ``.nan`` or ``.inf``).
+
 Relative paths in a config are taken relative to the current directory, as a shell would. The
 database URL and the device ports can be overridden from the environment (see ``ENV_OVERRIDES``);
 an override is validated like the file and its errors name the variable.
@@ -22,9 +25,18 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    create_model,
+    model_validator,
+)
 
 from labauto.errors import ConfigError
+from labauto.safeyaml import YamlRefused, load_yaml, read_text_limited, read_yaml_file
 
 #: Environment variables that override one config key each.
 ENV_OVERRIDES: dict[str, str] = {
@@ -43,7 +55,7 @@ Range = tuple[float, float]
 class Section(BaseModel):
     """Base of every config section: unknown keys are errors."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class DatabaseConfig(Section):
@@ -64,13 +76,58 @@ class CameraConfig(Section):
     count: Annotated[int, Field(ge=1)] = 3
 
 
+class GantryFault(Section):
+    """One fault armed in the simulated gantry (``labauto.drivers.grbl_sim``)."""
+
+    kind: str
+    count: Annotated[int, Field(ge=1)] = 1
+    seconds: NonNegative = 0.5
+    code: Annotated[int, Field(ge=1)] = 1
+    fraction: Annotated[float, Field(gt=0, lt=1)] = 0.5
+
+    @model_validator(mode="before")
+    @classmethod
+    def _fault_is_kind(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "fault" in data and "kind" not in data:
+            data = {("kind" if key == "fault" else key): value for key, value in data.items()}
+        return data
+
+    @model_validator(mode="after")
+    def _known_kind(self) -> GantryFault:
+        from labauto.drivers.grbl_sim import FAULT_KINDS
+
+        if self.kind not in FAULT_KINDS:
+            known = ", ".join(FAULT_KINDS)
+            raise ValueError(f"unknown fault {self.kind!r}; expected one of {known}")
+        return self
+
+
+def _gantry_faults(faults: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Check each gantry fault; keep them as plain mappings (what the simulator takes)."""
+    return [GantryFault.model_validate(fault).model_dump() for fault in faults]
+
+
+def _analyzer_faults(faults: dict[str, int | None]) -> dict[str, int | None]:
+    """Check the names and codes of the simulated analyzer's faults."""
+    from labauto.drivers.analyzer_sim import FAULTS
+
+    for name, code in faults.items():
+        if name not in FAULTS:
+            raise ValueError(f"unknown fault {name!r}; expected one of {', '.join(FAULTS)}")
+        if code is not None and name not in ("error_state", "exception"):
+            raise ValueError(f"fault {name!r} takes no code, got {code!r}")
+        if code is not None and not 0 < code < 65536:
+            raise ValueError(f"fault {name!r}: code must be 1-65535, got {code!r}")
+    return faults
+
+
 class RobotSimulatorConfig(Section):
     """The simulated gantry used when ``robot.simulate`` is true."""
 
     speed_factor: Positive = 20.0
     transport: Literal["pty", "tcp"] = "pty"
     #: Faults armed from the start, e.g. ``[{kind: no_reply, count: 1}]`` (see grbl_sim).
-    faults: list[dict[str, Any]] = []
+    faults: Annotated[list[dict[str, Any]], AfterValidator(_gantry_faults)] = []
 
 
 class AnalyzerSimulatorConfig(Section):
@@ -80,7 +137,7 @@ class AnalyzerSimulatorConfig(Section):
     transport: Literal["tcp", "rtu"] = "tcp"
     analysis_seconds: NonNegative = 2.0
     #: Faults active from the start, e.g. ``{error_state: 7}`` (see analyzer_sim).
-    faults: dict[str, int | None] = {}
+    faults: Annotated[dict[str, int | None], AfterValidator(_analyzer_faults)] = {}
 
 
 class DeckPoint(Section):
@@ -97,6 +154,8 @@ class RobotConfig(Section):
     baudrate: Annotated[int, Field(gt=0)] = 115200
     timeout_s: Positive = 2.0
     motion_timeout_s: Positive = 60.0
+    #: Reply timeout of a tool command (M8/M9), sent once the motion before it has finished.
+    tool_timeout_s: Positive = 5.0
     limits_x_mm: Range = (0.0, 300.0)
     limits_y_mm: Range = (0.0, 200.0)
     limits_z_mm: Range = (-50.0, 0.0)
@@ -114,6 +173,94 @@ class RobotConfig(Section):
             low, high = getattr(self, f"limits_{axis}_mm")
             if low >= high:
                 raise ValueError(f"limits_{axis}_mm: expected [min, max] with min < max")
+        for problem in self.position_problems():
+            raise ValueError(problem)
+        return self
+
+    def position_problems(self) -> list[str]:
+        """Every configured position (safe height, pick height, deposit) outside the limits."""
+        (x0, x1), (y0, y1), (z0, z1) = self.limits_x_mm, self.limits_y_mm, self.limits_z_mm
+        checks = [
+            ("safe_z_mm", self.safe_z_mm, z0, z1),
+            ("pick_z_mm", self.pick_z_mm, z0, z1),
+            ("deposit.x", self.deposit.x, x0, x1),
+            ("deposit.y", self.deposit.y, y0, y1),
+            ("deposit.z", self.deposit.z, z0, z1),
+        ]
+        return [
+            f"{name}: {value:g} mm is outside the travel limits [{low:g}, {high:g}] mm"
+            for name, value, low, high in checks
+            if not low <= value <= high
+        ]
+
+
+def _short(text: str, limit: int = 200) -> str:
+    """One line of at most ``limit`` characters (an error must not print a whole file)."""
+    line = " ".join(text.split())
+    return line if len(line) <= limit else line[: limit - 3] + "..."
+
+
+def _check_register_map(path: str | None) -> str | None:
+    """Read and check a register map file with the config's guards (see ``safeyaml``).
+
+    A file that does not exist (yet) is left to the analyzer driver, which reports it when it
+    connects: an example config may name the map of a machine it is not on.
+    """
+    if path is None or not os.path.lexists(path):
+        return path
+    from labauto.drivers.analyzer_map import parse_map
+
+    try:
+        data = read_yaml_file(path, what="register map")
+    except YamlRefused as exc:
+        raise ValueError(str(exc)) from None
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read the register map ({exc.strerror})") from None
+    except yaml.YAMLError as exc:
+        raise ValueError(f"{path}: register map is not valid YAML{_yaml_where(exc)}") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a register map (a mapping), got {type(data).__name__}")
+    try:
+        parse_map(data, path)
+    except Exception as exc:
+        raise ValueError(_short(str(exc))) from None
+    return path
+
+
+class RetryConfig(Section):
+    """How a device that failed is brought back: tries with a growing delay between them."""
+
+    attempts: Annotated[int, Field(ge=1, le=100)] = 5
+    initial_delay_s: NonNegative = 1.0
+    factor: Annotated[float, Field(ge=1)] = 2.0
+    max_delay_s: NonNegative = 15.0
+
+    def delays(self) -> list[float]:
+        """The wait before each try after the first (``attempts - 1`` values)."""
+        return [
+            min(self.max_delay_s, self.initial_delay_s * self.factor**i)
+            for i in range(self.attempts - 1)
+        ]
+
+
+class RunSection(Section):
+    """How a run is owned and recovered."""
+
+    #: A run's owner that has not shown it is alive for this long may be taken over.
+    lease_timeout_s: Positive = 30.0
+    #: How often the owner shows it is alive.
+    heartbeat_s: Positive = 5.0
+    #: Where the advisory locks of real devices live (default: the system's temp folder).
+    lock_dir: str | None = None
+    retry: RetryConfig = RetryConfig()
+
+    @model_validator(mode="after")
+    def _heartbeat_within_timeout(self) -> RunSection:
+        if self.heartbeat_s >= self.lease_timeout_s:
+            raise ValueError(
+                f"heartbeat_s ({self.heartbeat_s:g}) must be less than lease_timeout_s "
+                f"({self.lease_timeout_s:g})"
+            )
         return self
 
 
@@ -128,7 +275,7 @@ class AnalyzerConfig(Section):
     baudrate: Annotated[int, Field(gt=0)] = 19200
     unit: Annotated[int, Field(ge=0, le=247)] = 1
     #: A YAML register map; ``None`` uses the map shipped with labauto.
-    register_map: str | None = None
+    register_map: Annotated[str | None, AfterValidator(_check_register_map)] = None
     timeout_s: Positive = 2.0
     analysis_timeout_s: Positive = 120.0
 
@@ -178,6 +325,7 @@ class Config(Section):
     calibration: CalibrationConfig = CalibrationConfig()
     picking: PickingConfig = PickingConfig()
     output: OutputConfig = OutputConfig()
+    run: RunSection = RunSection()
 
 
 _EXPECTED = {
@@ -194,6 +342,7 @@ _EXPECTED = {
     "dict_type": "a mapping",
     "model_type": "a mapping",
     "model_attributes_type": "a mapping",
+    "finite_number": "a finite number",
 }
 
 
@@ -303,13 +452,84 @@ SECTION_CONSTRAINTS: dict[str, dict[str, Any]] = {
         "des_threshold_deg": Field(gt=0, le=90),
         "statistic": Literal["median", "mean"],
     },
-    "plate": {},
+    "plate": {
+        "rim_margin_mm": float,  # negative grows the usable area past the dish edge found
+    },
 }
+
+
+def _is_number_type(annotation: Any) -> bool:
+    return annotation in (int, float)
+
+
+def _is_pair_type(annotation: Any) -> bool:
+    return typing.get_origin(annotation) is tuple and typing.get_args(annotation) in (
+        (float, float),
+        (int, int),
+    )
+
+
+def _generic_rule(annotation: Any, default: Any) -> Any:
+    """A range rule read from a field's type and default (no field names hard-coded).
+
+    A number (or a pair of numbers) whose default is not negative must not be negative; a pair
+    (``*_range``) must be ``[low, high]`` with ``low <= high``.
+    """
+    if _is_number_type(annotation) and isinstance(default, int | float) and default >= 0:
+        return Annotated[annotation, Field(ge=0)]
+    if _is_pair_type(annotation) and isinstance(default, tuple):
+        element = typing.get_args(annotation)[0]
+        if all(isinstance(v, int | float) and v >= 0 for v in default):
+            element = Annotated[element, Field(ge=0)]
+        return Annotated[tuple[element, element], AfterValidator(_ordered_pair)]
+    return annotation
+
+
+def _ordered_pair(pair: tuple[float, float]) -> tuple[float, float]:
+    if pair[0] > pair[1]:
+        raise ValueError(f"expected [low, high] with low <= high, got [{pair[0]:g}, {pair[1]:g}]")
+    return pair
+
+
+#: Name patterns of a field pair that must hold ``low <= high``: (low prefix/suffix, high).
+_PAIR_PATTERNS = (("min_", "max_"), ("_low", "_high"), ("_min", "_max"))
+
+
+def _bound_pairs(names: list[str]) -> list[tuple[str, str]]:
+    """Fields that bound the same quantity from below and above, e.g. canny_low/canny_high."""
+    pairs = []
+    for name in names:
+        for low, high in _PAIR_PATTERNS:
+            if low.endswith("_") and name.startswith(low):
+                other = high + name.removeprefix(low)
+            elif low.startswith("_") and name.endswith(low):
+                other = name.removesuffix(low) + high
+            else:
+                continue
+            if other in names:
+                pairs.append((name, other))
+    return pairs
+
+
+def _check_bound_pairs(pairs: list[tuple[str, str]]) -> Any:
+    def check(model: BaseModel) -> BaseModel:
+        for low, high in pairs:
+            lo, hi = getattr(model, low), getattr(model, high)
+            if isinstance(lo, int | float) and isinstance(hi, int | float) and lo > hi:
+                raise ValueError(f"{low} ({lo:g}) must not exceed {high} ({hi:g})")
+        return model
+
+    return model_validator(mode="after")(check)
 
 
 @functools.cache
 def section_model(section: str) -> type[BaseModel]:
-    """A pydantic model of a dataclass section: its fields, types, defaults and constraints."""
+    """A pydantic model of a dataclass section: its fields, types, defaults and constraints.
+
+    Fields named in ``SECTION_CONSTRAINTS`` get that rule; every other number gets the generic
+    rule of :func:`_generic_rule`, and pairs of fields such as ``canny_low``/``canny_high`` or
+    ``min_x``/``max_x`` must be ordered. Numbers must be finite (no NaN, no infinity).
+    """
     module_name, class_name = DATACLASS_SECTIONS[section]
     cls = getattr(importlib.import_module(module_name), class_name)
     hints = typing.get_type_hints(cls)
@@ -324,13 +544,17 @@ def section_model(section: str) -> type[BaseModel]:
             default = ...
         rule = constraints.get(item.name)
         if rule is None:
-            annotation = hints[item.name]
+            annotation = _generic_rule(hints[item.name], default)
         elif isinstance(rule, type(Field())):
             annotation = Annotated[hints[item.name], rule]
         else:
             annotation = rule
         fields[item.name] = (annotation, default)
-    return create_model(f"{class_name}Section", __base__=Section, **fields)
+    pairs = _bound_pairs(list(fields))
+    validators = {"_ordered_bounds": _check_bound_pairs(pairs)} if pairs else None
+    return create_model(
+        f"{class_name}Section", __base__=Section, __validators__=validators, **fields
+    )
 
 
 def section_params(config: Config, section: str) -> Any:
@@ -384,6 +608,14 @@ def parse_config(
     return config
 
 
+def _yaml_where(exc: yaml.YAMLError) -> str:
+    """`` at line N: problem`` for a YAML error, as far as it is known."""
+    mark = getattr(exc, "problem_mark", None)
+    where = f" at line {mark.line + 1}" if mark is not None else ""
+    problem = getattr(exc, "problem", None)
+    return where + (f": {problem}" if problem else "")
+
+
 def load_config(path: str | Path | None, environ: dict[str, str] | None = None) -> Config:
     """Read and validate a YAML config file; ``None`` gives the defaults (a simulated workcell).
 
@@ -396,17 +628,17 @@ def load_config(path: str | Path | None, environ: dict[str, str] | None = None) 
         return parse_config({}, "<defaults>", environ)
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_text_limited(path, what="config file")
     except FileNotFoundError:
         raise ConfigError(f"{path}: config file not found") from None
+    except YamlRefused as exc:
+        raise ConfigError(str(exc)) from None
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read config file ({exc.strerror})") from None
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml(text, str(path))
+    except YamlRefused as exc:
+        raise ConfigError(str(exc)) from None
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None)
-        detail = f": {problem}" if problem else ""
-        raise ConfigError(f"{path}: not valid YAML{where}{detail}") from None
+        raise ConfigError(f"{path}: not valid YAML{_yaml_where(exc)}") from None
     return parse_config(data, str(path), environ)

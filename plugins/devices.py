@@ -56,6 +56,7 @@ def make_grbl_robot(section: Any) -> GrblRobot | Simulated:
         travel_feed=section.travel_feed,
         z_feed=section.z_feed,
         motion_timeout=section.motion_timeout_s,
+        tool_timeout=section.tool_timeout_s,
     )
     if not section.simulate:
         return GrblRobot(section.port, **options)

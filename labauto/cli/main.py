@@ -49,8 +49,14 @@ def main(argv: list[str] | None = None) -> int:
         cli.main(args=args, prog_name="labauto", standalone_mode=False)
     except click.exceptions.Exit as exc:
         return exc.exit_code
+    except SystemExit as exc:  # a command's own exit status (e.g. 3: completed with errors)
+        return exc.code if isinstance(exc.code, int) else 1
+    except click.UsageError as exc:  # one line too, with where to find help
+        where = f" (see {exc.ctx.command_path} --help)" if exc.ctx is not None else ""
+        click.echo(f"labauto: error: {_one_line(exc.format_message())}{where}", err=True)
+        return exc.exit_code
     except click.ClickException as exc:
-        exc.show()
+        click.echo(f"labauto: error: {_one_line(exc.format_message())}", err=True)
         return exc.exit_code
     except click.exceptions.Abort:
         click.echo("labauto: aborted", err=True)
@@ -58,12 +64,29 @@ def main(argv: list[str] | None = None) -> int:
     except (LabautoError, DeviceError, ValueError, OSError) as exc:
         if debug:
             raise
-        click.echo(f"labauto: error: {exc}", err=True)
+        click.echo(f"labauto: error: {_one_line(str(exc))}", err=True)
         return 1
     except KeyboardInterrupt:
         click.echo("labauto: interrupted", err=True)
         return 130
+    except Exception as exc:  # cv2.error, RecursionError, MemoryError, OverflowError, ...
+        if debug:
+            raise
+        kind = type(exc).__name__
+        if type(exc).__module__ not in ("builtins", None):
+            kind = f"{type(exc).__module__.split('.')[0]}.{kind}"  # e.g. cv2.error
+        click.echo(
+            f"labauto: error: {kind}: {_one_line(str(exc))} (labauto --debug shows the traceback)",
+            err=True,
+        )
+        return 1
     return 0
+
+
+def _one_line(text: str, limit: int = 500) -> str:
+    """The message on one line, at most ``limit`` characters (e.g. cv2.error spans lines)."""
+    line = " ".join(text.split()) or "(no message)"
+    return line if len(line) <= limit else line[: limit - 3] + "..."
 
 
 if __name__ == "__main__":

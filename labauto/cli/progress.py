@@ -28,6 +28,11 @@ SHOWN = {
     "robot.recovered",
     "analyzer.recovered",
     "run.cleanup",
+    "run.lease",
+    "run.config_changed",
+    "plate.repeated_frame",
+    "robot.retry",
+    "analyzer.retry",
 }
 
 
@@ -46,8 +51,11 @@ class RunProgress:
         )
         self.task = self.progress.add_task("picks", total=0)
 
-    def start(self, run_id: int, resumed: bool) -> None:
-        self.progress.update(self.task, description=f"run {run_id} picks")
+    def start(self, run_id: int, resumed: bool, planned: int = 0, done: int = 0) -> None:
+        """Start drawing; a resumed run starts from its ``planned`` picks, ``done`` of them."""
+        self.progress.update(
+            self.task, description=f"run {run_id} picks", total=planned, completed=done
+        )
         self.console.print(f"{'resuming' if resumed else 'starting'} run {run_id}")
         self.progress.start()
 
@@ -61,5 +69,6 @@ class RunProgress:
         elif kind == "pick.done":
             self.progress.advance(self.task)
         if kind in SHOWN:
-            style = "red" if kind.endswith(("failed", "unknown", "estop", "error")) else "dim"
+            warn = ("failed", "unknown", "estop", "error", "retry", "repeated_frame", "lease")
+            style = "red" if kind.endswith(warn) else "dim"
             self.progress.console.print(f"[{style}]{kind}[/{style}] {message}")

@@ -12,6 +12,9 @@ import click
 from labauto.cli.options import config_option
 from labauto.config import Config
 
+#: A run id as the database can hold it (a larger number is a usage error, not an overflow).
+RUN_ID = click.IntRange(1, 2**63 - 1)
+
 
 def _store(config: Config):
     from labauto.store import Store
@@ -19,17 +22,48 @@ def _store(config: Config):
     return Store.open(config.database.url, migrate=True)
 
 
+def _existing_store(config: Config):
+    """The store for commands that only read or control runs: a missing database is an error.
+
+    (Opening a mistyped SQLite path would otherwise create an empty database there.)
+    """
+    from sqlalchemy.engine import make_url
+
+    from labauto.errors import LabautoError
+    from labauto.store.db import safe_url
+
+    try:
+        url = make_url(config.database.url)
+    except Exception:
+        return _store(config)  # the store names a malformed URL
+    database = url.database
+    if url.get_backend_name() == "sqlite" and database not in (None, "", ":memory:"):
+        from pathlib import Path
+
+        if not Path(database).exists():
+            raise LabautoError(
+                f"no database at {safe_url(config.database.url)!r} (file {database} does not "
+                "exist): check database.url or LABAUTO_DATABASE_URL"
+            )
+    return _store(config)
+
+
 @click.command("run")
 @config_option
 @click.option("--new", "force_new", is_flag=True, help="Start a new run even if one is unfinished.")
-@click.option("--resume", "resume_id", type=int, default=None, help="Resume this run id.")
+@click.option(
+    "--resume", "resume_id", type=RUN_ID, default=None, help="Resume this unfinished or failed run."
+)
 @click.option("--json", "as_json", is_flag=True, help="Print the outcome as JSON at the end.")
 def run_cmd(config: Config, force_new: bool, resume_id: int | None, as_json: bool) -> None:
     """Pick colonies: analyse plates, pick, deliver to the analyzer, store everything.
 
-    An unfinished run of the same name (for example after a crash) is resumed unless --new is
-    given. Ctrl-C stops at the next safe point; a second Ctrl-C is an emergency stop. From
-    another terminal: labauto runs pause|resume|stop|estop ID.
+    An unfinished run of the same name and config (for example after a crash) is resumed
+    unless --new is given; one started with another config, or a failed one, is resumed only
+    with --resume ID. Exit status: 0 succeeded or stopped, 1 failed, 3 completed with errors
+    (some picks failed or have an unknown outcome). Ctrl-C, SIGTERM and SIGHUP stop at the next
+    safe point; a second Ctrl-C is an emergency stop. From another terminal: labauto runs
+    pause|resume|stop|estop ID.
     """
     from labauto.cli.progress import RunProgress
     from labauto.orchestrator.session import open_run
@@ -39,7 +73,13 @@ def run_cmd(config: Config, force_new: bool, resume_id: int | None, as_json: boo
     with open_run(
         config, store, resume_id=resume_id, force_new=force_new, reporter=progress
     ) as session:
-        progress.start(session.run_id, session.resumed)
+        picks = store.run_summary(session.run_id).picks_by_state
+        progress.start(
+            session.run_id,
+            session.resumed,
+            planned=sum(picks.values()),
+            done=sum(n for state, n in picks.items() if state != "planned"),
+        )
         previous = _install_signal_handlers(session.control)
         try:
             outcome = session.execute()
@@ -66,8 +106,12 @@ def run_cmd(config: Config, force_new: bool, resume_id: int | None, as_json: boo
             + (f" ({outcome.error})" if outcome.error else "")
             + f"; picks: {_counts(outcome.picks)}; output in {outcome.output_dir}"
         )
-    if outcome.state == "failed":
-        raise SystemExit(1)
+    if outcome.state in EXIT_CODES:
+        raise SystemExit(EXIT_CODES[outcome.state])
+
+
+#: Exit status of ``labauto run`` by outcome (0 otherwise: succeeded, stopped).
+EXIT_CODES = {"failed": 1, "completed_with_errors": 3}
 
 
 def _counts_text(values: dict[str, Any]) -> str:
@@ -79,10 +123,11 @@ def _counts(picks: dict[str, int]) -> str:
 
 
 def _install_signal_handlers(control: Any) -> dict[int, Any]:
-    """Ctrl-C stops (twice: e-stop), SIGTERM stops; returns the handlers replaced."""
+    """Ctrl-C stops (twice: e-stop), SIGTERM and SIGHUP stop; returns the handlers replaced."""
     if threading.current_thread() is not threading.main_thread():
         return {}
-    previous = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
+    stopping = [signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
+    previous = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, *stopping)}
     interrupts = {"count": 0}
 
     def on_interrupt(signum: int, frame: Any) -> None:
@@ -95,7 +140,8 @@ def _install_signal_handlers(control: Any) -> dict[int, Any]:
             control.estop()
 
     signal.signal(signal.SIGINT, on_interrupt)
-    signal.signal(signal.SIGTERM, lambda signum, frame: control.stop())
+    for signum in stopping:  # a closed terminal (SIGHUP) must not leave the run "running"
+        signal.signal(signum, lambda signum, frame: control.stop())
     return previous
 
 
@@ -109,7 +155,7 @@ def runs() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 def runs_list(config: Config, as_json: bool) -> None:
     """Summarise the stored runs, newest first."""
-    summaries = _store(config).list_runs()
+    summaries = _existing_store(config).list_runs()
     if as_json:
         click.echo(json.dumps([s.to_dict() for s in summaries], indent=2, default=str))
         return
@@ -133,13 +179,13 @@ def runs_list(config: Config, as_json: bool) -> None:
 
 
 @runs.command("show")
-@click.argument("run_id", type=int)
+@click.argument("run_id", type=RUN_ID)
 @config_option
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @click.option(
     "--events",
     "n_events",
-    type=int,
+    type=click.IntRange(0, 100_000),
     default=15,
     show_default=True,
     help="How many of the latest events to show.",
@@ -148,7 +194,7 @@ def runs_show(run_id: int, config: Config, as_json: bool, n_events: int) -> None
     """Show one run: state, plates, picks (flagged ones first) and its latest events."""
     from labauto.orchestrator.session import describe_run
 
-    report = describe_run(_store(config), run_id, n_events)
+    report = describe_run(_existing_store(config), run_id, n_events)
     if as_json:
         click.echo(json.dumps(report, indent=2, default=str))
         return
@@ -158,6 +204,11 @@ def runs_show(run_id: int, config: Config, as_json: bool, n_events: int) -> None
         + (f" ({run['error']})" if run.get("error") else "")
     )
     click.echo(f"  started {run.get('started_at')}, finished {run.get('finished_at')}")
+    if run.get("lease_pid") is not None:
+        click.echo(
+            f"  owned by pid {run['lease_pid']} on host {run['lease_host']}, "
+            f"last heartbeat {run.get('lease_heartbeat_at')}"
+        )
     click.echo(f"  plates: {', '.join(report['plates']) or 'none'}")
     click.echo(f"  colonies: {_counts_text(report['colonies']) or 'none'}")
     click.echo(f"  picks: {_counts(report['picks_by_state'])}")
@@ -180,12 +231,12 @@ def runs_show(run_id: int, config: Config, as_json: bool, n_events: int) -> None
 
 def _control_command(command: str):
     @runs.command(command)
-    @click.argument("run_id", type=int)
+    @click.argument("run_id", type=RUN_ID)
     @config_option
     def send(run_id: int, config: Config) -> None:
         from labauto.orchestrator.session import request_control
 
-        request_control(_store(config), run_id, command)
+        request_control(_existing_store(config), run_id, command)
         click.echo(f"asked run {run_id} to {command}")
 
     send.__doc__ = f"Ask a running run to {command} (recorded in its audit log)."

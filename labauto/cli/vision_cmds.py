@@ -66,8 +66,10 @@ def detect_cmd(image: str, method: str | None, as_json: bool, config: Config) ->
 def plate_cmd(image: str, as_json: bool, annotate: str | None, config: Config) -> None:
     """Find and classify the colonies on the petri dish in IMAGE."""
     from labauto.api import analyze_plate
-    from labauto.imageio import read_image, write_image
+    from labauto.imageio import check_image_target, read_image, write_image
 
+    if annotate:
+        check_image_target(annotate)  # before the work, not after it
     plugins = load_plugins(config.plugins.enabled, config.plugins.disabled)
     pixels = read_image(image)
     result = analyze_plate(pixels, plugins=plugins, **vars(plate_params(config)))

@@ -9,9 +9,18 @@ Picks move through ``planned -> moving -> picked -> delivered -> analyzed`` (or 
 each state is committed before the device is asked to do the next thing. That makes a crash
 recoverable: when a run is resumed, a pick found in ``moving``, ``picked`` or ``delivered`` has an
 unknown outcome (the probe may or may not be on the tool or in the analyzer), so it is set to
-``unknown`` and flagged for the operator instead of being repeated; ``planned`` picks go on; a
-plate whose colonies are already stored is not stored again, so nothing is picked twice and
-nothing stored is lost.
+``unknown`` and flagged for the operator instead of being repeated; ``planned`` picks go on.
+
+A plate's image, detections, colonies, planned picks and their events are committed in one
+transaction (:meth:`Store.store_plate`), so a crash leaves a plate either whole or absent. Plates
+are identified by their place in the run (the camera's order), never by their pixels: a resumed
+run finds plate 2 as plate 2 even if it looks exactly like plate 1 (a repeated frame, which is
+reported as a warning). So nothing is picked twice and nothing stored is lost.
+
+The outcome is honest: ``succeeded`` only when every planned pick was analysed,
+``completed_with_errors`` when the run got through its plates but some picks failed or have an
+unknown outcome, ``failed`` when it could not go on (resumable with ``--resume ID``). A device
+that fails is brought back with the retry policy of ``run.retry`` before the run gives up.
 """
 
 from __future__ import annotations
@@ -29,10 +38,12 @@ from typing import Any, Protocol
 import numpy as np
 
 from labauto.config import Config, plate_params
-from labauto.drivers.errors import DeviceError
+from labauto.drivers.errors import DeviceError, DeviceRefused
+from labauto.errors import RunError
 from labauto.orchestrator.calibration import Calibration
 from labauto.orchestrator.control import EmergencyStop, RunControl, StopRequested
 from labauto.orchestrator.planning import PickRules, plan_picks
+from labauto.orchestrator.recovery import with_retries
 from labauto.plugin_manager import Plugins
 from labauto.store import Store
 from labauto.store.convert import colony_rows
@@ -203,13 +214,14 @@ class ColonyPickingRun:
 
     # -- the run -----------------------------------------------------------------------------
     def execute(self) -> RunOutcome:
-        """Run (or resume) to a final state: succeeded, stopped or failed."""
+        """Run (or resume) to a final state: succeeded, completed_with_errors, stopped, failed."""
         self._flag_unknown_picks()
         if self.store.get_run(self.run_id).state == RunState.STOPPING:
             return self._finish(RunState.STOPPED, "stopped before a restart; stop completed")
         self._set_run_state(RunState.RUNNING)
         final, error = RunState.SUCCEEDED, None
         try:
+            self._preflight()
             calibration = calibration_from_config(self.config)
             self.event(
                 "calibration",
@@ -218,9 +230,10 @@ class ColonyPickingRun:
                 data=calibration.to_dict(),
             )
             self._prepare_devices()
-            for plate_name, image in self.workcell.camera:
+            for position, (plate_name, image) in enumerate(self.workcell.camera):
                 self._checkpoint()
-                self._process_plate(plate_name, image, calibration)
+                self._process_plate(position, plate_name, image, calibration)
+            final, error = self._outcome()
         except StopRequested:
             final, error = RunState.STOPPED, None
             self._cleanup()
@@ -239,6 +252,35 @@ class ColonyPickingRun:
             final, error = RunState.FAILED, f"{type(exc).__name__}: {exc}"
             self._flag_unknown_picks()
         return self._finish(final, error)
+
+    def _outcome(self) -> tuple[RunState, str | None]:
+        """``succeeded`` if every pick was analysed, else ``completed_with_errors`` and why."""
+        counts = self.store.run_summary(self.run_id).picks_by_state
+        failed = counts.get(PickState.FAILED, 0)
+        unknown = counts.get(PickState.UNKNOWN, 0)
+        if not failed and not unknown:
+            return RunState.SUCCEEDED, None
+        total = sum(counts.values())
+        parts = [f"{failed} of {total} picks failed"] if failed else []
+        if unknown:
+            parts.append(f"{unknown} of {total} have an unknown outcome (flagged for the operator)")
+        return RunState.COMPLETED_WITH_ERRORS, "; ".join(parts)
+
+    def _preflight(self) -> None:
+        """Checks before anything moves: positions inside the travel, output folder writable."""
+        problems = self.config.robot.position_problems()
+        if problems:
+            raise RunError("robot: " + "; ".join(problems))
+        if self.config.output.annotate:
+            try:
+                self.output_dir.mkdir(parents=True, exist_ok=True)
+                probe = self.output_dir / ".labauto-write-test"
+                probe.write_bytes(b"")
+                probe.unlink()
+            except OSError as exc:
+                raise RunError(
+                    f"{self.output_dir}: output folder cannot be written ({exc.strerror})"
+                ) from None
 
     def _set_run_state(self, state: RunState, error: str | None = None) -> None:
         self.store.set_run_state(self.run_id, state, error=error)
@@ -267,7 +309,7 @@ class ColonyPickingRun:
     def _prepare_devices(self) -> None:
         robot, analyzer = self.workcell.robot, self.workcell.analyzer
         for name, device in (("robot", robot), ("analyzer", analyzer)):
-            device.connect()
+            self._retrying(name, "connect", device.connect)
             info = device.identify()
             self.event(
                 f"{name}.ready", f"{name} connected: {_summary(info)}", source=name, data=info
@@ -300,28 +342,26 @@ class ColonyPickingRun:
             )
 
     # -- one plate ---------------------------------------------------------------------------
-    def _process_plate(self, plate_name: str, image: np.ndarray, calibration: Calibration) -> None:
+    def _process_plate(
+        self, position: int, plate_name: str, image: np.ndarray, calibration: Calibration
+    ) -> None:
         application = self.plugins.registry.get("applications", "plate")
         result = application(image, self.plate_params)
-        plate = self.store.add_plate(plate_name, source=self.config.camera.path)
-        stored = self.store.add_image(
-            plate.id,
-            path=plate_name,
-            width=result.width,
-            height=result.height,
-            sha256=image_digest(image),
-            run_id=self.run_id,
-        )
-        if self.store.colony_ids_for_image(self.run_id, stored.id):
+        stored = self.store.image_at(self.run_id, position)
+        if stored is not None:
+            if stored.path != plate_name:
+                raise RunError(
+                    f"plate {position} of run {self.run_id} was {stored.path!r} but the camera "
+                    f"now gives {plate_name!r}: the plates changed since the run started"
+                )
             self.event(
                 "plate.resumed",
-                f"{plate_name}: colonies already stored, not re-stored",
-                data={"plate": plate_name},
+                f"{plate_name}: plate {position} already stored, not re-stored",
+                data={"plate": plate_name, "position": position},
             )
+            id_of = {c.colony_index: c.id for c in self.store.colonies(self.run_id, stored.id)}
         else:
-            self._store_plate(plate_name, stored.id, result, calibration)
-        # stored colony id by the plate result's colony id (its colony_index)
-        id_of = {c.colony_index: c.id for c in self.store.colonies(self.run_id, stored.id)}
+            id_of = self._store_plate(position, plate_name, image, result, calibration)
         self._write_outputs(plate_name, image, result, id_of)
         on_this_plate = set(id_of.values())
         for pick in self.store.picks_for_run(self.run_id):
@@ -331,52 +371,80 @@ class ColonyPickingRun:
         self._write_outputs(plate_name, image, result, id_of)
 
     def _store_plate(
-        self, plate_name: str, image_id: int, result: Any, calibration: Calibration
-    ) -> None:
-        """Store a plate's detections and colonies and plan its picks."""
+        self,
+        position: int,
+        plate_name: str,
+        image: np.ndarray,
+        result: Any,
+        calibration: Calibration,
+    ) -> dict[int, int]:
+        """Store a plate (image, detections, colonies, planned picks) in one transaction.
+
+        Returns the stored colony id of each colony of the plate result.
+        """
+        digest = image_digest(image)
+        for twin in self.store.images_with_digest(self.run_id, digest):
+            self.event(
+                "plate.repeated_frame",
+                f"warning: {plate_name} (plate {position}) has exactly the pixels of "
+                f"{twin.path} (plate {twin.position}): a duplicate file or a stale camera "
+                "frame? It is treated as a plate of its own",
+                data={"plate": plate_name, "position": position, "same_as": twin.position},
+            )
         counts = result.counts
-        self.event(
-            "plate.analyzed",
-            f"{plate_name}: {counts['authentic']} authentic, {counts['merged']} merged, "
-            f"{counts['mixed']} mixed ({result.timing_ms:.1f} ms)",
-            data={"plate": plate_name, **counts},
-        )
         method = f"plate:{self.plate_params.method}"
-        detection_ids = self.store.add_detections(
-            self.run_id, image_id, [_detection_row(c, method) for c in result.colonies]
+        local_ids = [c.id for c in result.colonies]
+        index_of = {local: i for i, local in enumerate(local_ids)}
+        colonies = colony_rows(result.to_dict())
+        for i, row in enumerate(colonies):
+            row["detection"] = i
+        planned = plan_picks(result.colonies, calibration, self.rules, result.dish)
+        picks = [
+            {
+                "colony": index_of[p.colony_id],
+                "deck_x_mm": p.deck_mm[0],
+                "deck_y_mm": p.deck_mm[1],
+            }
+            for p in planned
+        ]
+        events = [
+            {
+                "kind": "plate.analyzed",
+                "message": f"{plate_name}: {counts['authentic']} authentic, "
+                f"{counts['merged']} merged, {counts['mixed']} mixed ({result.timing_ms:.1f} ms)",
+                "data": {"plate": plate_name, "position": position, **counts},
+            },
+            {
+                "kind": "picks.planned",
+                "message": f"{plate_name}: {len(planned)} picks planned",
+                "data": {"plate": plate_name, "position": position, "picks": len(planned)},
+            },
+        ]
+        self.exchanges.flush()
+        stored = self.store.store_plate(
+            self.run_id,
+            position=position,
+            name=plate_name,
+            source=self.config.camera.path,
+            path=plate_name,
+            width=result.width,
+            height=result.height,
+            sha256=digest,
+            detections=[_detection_row(c, method) for c in result.colonies],
+            colonies=colonies,
+            picks=picks,
+            events=events,
         )
+        for event in events:
+            self._notify(event["kind"], event["message"], event["data"])
         self._hook(
             "labauto_detections_stored",
             run_id=self.run_id,
-            image_id=image_id,
+            image_id=stored.image_id,
             plate=plate_name,
-            count=len(detection_ids),
+            count=len(stored.detection_ids),
         )
-        local_ids = [c.id for c in result.colonies]
-        colony_ids = self.store.add_colonies(
-            self.run_id,
-            image_id,
-            colony_rows(result.to_dict(), dict(zip(local_ids, detection_ids, strict=True))),
-        )
-        id_of = dict(zip(local_ids, colony_ids, strict=True))
-        planned = plan_picks(result.colonies, calibration, self.rules, result.dish)
-        self.store.plan_picks(
-            self.run_id,
-            [
-                {
-                    "colony_id": id_of[p.colony_id],
-                    "sequence": p.sequence,
-                    "deck_x_mm": p.deck_mm[0],
-                    "deck_y_mm": p.deck_mm[1],
-                }
-                for p in planned
-            ],
-        )
-        self.event(
-            "picks.planned",
-            f"{plate_name}: {len(planned)} picks planned",
-            data={"plate": plate_name, "picks": len(planned)},
-        )
+        return dict(zip(local_ids, stored.colony_ids, strict=True))
 
     # -- one pick ----------------------------------------------------------------------------
     def _do_pick(self, pick: Any) -> None:
@@ -416,7 +484,9 @@ class ColonyPickingRun:
         """Mark the pick failed and bring the failed device back (if that fails, so does the run).
 
         The robot is reconnected and homed (its position may be lost); the analyzer is
-        reconnected and reset. The pick itself is not retried: its probe may be spoiled.
+        reconnected and reset; each with the retry policy of ``run.retry``. The pick itself is
+        not retried: its probe may be spoiled. A refused move (a target outside the travel)
+        needs no recovery: nothing was sent.
         """
         self.exchanges.flush()
         self.store.set_pick_state(pick.id, PickState.FAILED, error=str(exc))
@@ -425,17 +495,52 @@ class ColonyPickingRun:
             f"pick {pick.id} failed: {exc}",
             data={"pick_id": pick.id, "error": str(exc)},
         )
+        if isinstance(exc, DeviceRefused):
+            return
         if exc.device == self.workcell.analyzer.name:
-            self.workcell.analyzer.reconnect()
-            self.workcell.analyzer.reset()
+            analyzer = self.workcell.analyzer
+
+            def recover() -> None:
+                analyzer.reconnect()
+                analyzer.reset()
+
         else:
-            self.workcell.robot.reconnect()
-            self.workcell.robot.home()
+            robot = self.workcell.robot
+
+            def recover() -> None:
+                robot.reconnect()
+                robot.home()
+
+        self._retrying(exc.device, "recover", recover)
         self.event(
             f"{exc.device}.recovered",
             f"{exc.device} reconnected and reset after: {exc}",
             source=exc.device,
         )
+
+    def _retrying(self, device: str, what: str, action: Callable[[], Any]) -> Any:
+        """Run a device step with the retry policy; each failed try is an audit event."""
+
+        def failed(attempt: int, attempts: int, delay_s: float, error: BaseException) -> None:
+            then = f"; next try in {delay_s:.1f} s" if attempt < attempts else "; giving up"
+            self.event(
+                f"{device}.retry",
+                f"{device} {what} try {attempt} of {attempts} failed: {error}{then}",
+                source=device,
+                data={"attempt": attempt, "attempts": attempts, "error": str(error)},
+            )
+
+        try:
+            return with_retries(
+                action,
+                self.config.run.retry,
+                on_failure=failed,
+                retry_on=(DeviceError, OSError),
+                cancelled=lambda: self.control.stop_requested or self.control.estopped,
+            )
+        except (DeviceError, OSError):
+            self.control.raise_if_stopped()  # the operator's stop ended the retries
+            raise
 
     # -- operator output ---------------------------------------------------------------------
     def _write_outputs(

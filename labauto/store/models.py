@@ -19,8 +19,12 @@ Choices
 ------------------------
 * ``plates.name`` is unique: a plate's name is its label (barcode), so adding a plate again
   returns the stored one.
-* ``images.run_id`` (nullable) records the run that captured the image; ``(run_id, sha256)`` is
-  unique, so a run that resumes after a crash gets its stored image back instead of a copy.
+* ``images.run_id`` (nullable) records the run that captured the image and ``images.position``
+  the plate's place in that run (0, 1, ... in camera order); ``(run_id, position)`` is unique, so
+  a run that resumes after a crash finds each plate by its place, never by its pixels (two
+  plates with byte-identical images are still two plates).
+* ``runs.config_hash`` ties a run to its effective config; ``runs.lease_*`` is the lease of the
+  process that owns the run (pid, host, a random token and the last heartbeat).
 * ``picks.colony_id`` must name a colony of the same run (checked by the repository).
 """
 
@@ -103,13 +107,22 @@ class Run(Base):
     started_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     error: Mapped[str | None] = mapped_column(Text)
+    config_hash: Mapped[str | None] = mapped_column(String(64))
+    lease_token: Mapped[str | None] = mapped_column(String(64))
+    lease_pid: Mapped[int | None] = mapped_column(Integer)
+    lease_host: Mapped[str | None] = mapped_column(String(255))
+    lease_heartbeat_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
 
 
 class Image(Base):
-    """A camera image of a plate. ``sha256`` is the hex digest of the image file's bytes."""
+    """A camera image of a plate. ``sha256`` is the hex digest of the image's pixels.
+
+    ``position`` is the plate's place in its run (camera order); it, not the digest, identifies
+    the plate within the run.
+    """
 
     __tablename__ = "images"
-    __table_args__ = (UniqueConstraint("run_id", "sha256"),)
+    __table_args__ = (UniqueConstraint("run_id", "position"),)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     plate_id: Mapped[int] = mapped_column(ForeignKey("plates.id"), index=True)
@@ -119,6 +132,7 @@ class Image(Base):
     height: Mapped[int] = mapped_column(Integer)
     sha256: Mapped[str] = mapped_column(String(64), index=True)
     captured_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    position: Mapped[int | None] = mapped_column(Integer)
 
 
 class Detection(Base):

@@ -60,6 +60,7 @@ class ImageRecord(Record):
     height: int
     sha256: str
     captured_at: datetime
+    position: int | None = None
 
 
 @dataclass(frozen=True)
@@ -74,6 +75,22 @@ class RunRecord(Record):
     started_at: datetime | None
     finished_at: datetime | None
     error: str | None
+    config_hash: str | None = None
+    lease_token: str | None = None
+    lease_pid: int | None = None
+    lease_host: str | None = None
+    lease_heartbeat_at: datetime | None = None
+
+
+@dataclass(frozen=True)
+class StoredPlate(Record):
+    """What :meth:`Store.store_plate` wrote for one plate, ids in the order of the given rows."""
+
+    plate_id: int
+    image_id: int
+    detection_ids: list[int]
+    colony_ids: list[int]
+    pick_ids: list[int]
 
 
 @dataclass(frozen=True)

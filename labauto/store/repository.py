@@ -34,6 +34,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from .db import BEGIN_OPTION, check_connection, make_engine, safe_url, upgrade
 from .errors import IntegrityViolation, InvalidTransition, InvalidValue, NotFound, StoreError
+from .leases import LeaseHeld, LeaseLost, LeaseOwner, StaleCheck, heartbeat_age
 from .models import AnalyzerResult, Colony, Detection, Event, Image, Pick, Plate, Run
 from .records import (
     AnalyzerResultRecord,
@@ -45,6 +46,7 @@ from .records import (
     PlateRecord,
     RunRecord,
     RunSummary,
+    StoredPlate,
     to_record,
 )
 from .rows import RowShape, json_data, plain_scalar
@@ -273,7 +275,14 @@ class Store:
 
     # ------------------------------------------------------------------ runs
 
-    def create_run(self, name: str, config: Any = None) -> int:
+    def create_run(
+        self,
+        name: str,
+        config: Any = None,
+        *,
+        config_hash: str | None = None,
+        lease: LeaseOwner | None = None,
+    ) -> int:
         """Store a new run in state ``idle`` and return its id.
 
         Parameters
@@ -282,13 +291,113 @@ class Store:
             A name for people (need not be unique).
         config : JSON-able, optional
             The run's configuration (dict, pydantic model, ...), stored as JSON for the audit.
+        config_hash : str, optional
+            SHA-256 of the effective config (what a resume is compared against).
+        lease : LeaseOwner, optional
+            The process that owns the new run, written in the same transaction.
         """
         config_data = json_data(config, "run config")
         with self._write("create_run") as session:
-            run = Run(name=name, state=RunState.IDLE, config=config_data)
+            run = Run(name=name, state=RunState.IDLE, config=config_data, config_hash=config_hash)
+            if lease is not None:
+                self._set_lease(run, lease, utcnow())
             session.add(run)
             session.flush()
             return run.id
+
+    def set_run_config(self, run_id: int, config: Any, config_hash: str) -> None:
+        """Replace a run's stored config and hash (the operator resumed it with another)."""
+        config_data = json_data(config, "run config")
+        with self._write("set_run_config") as session:
+            run = self._get(session, Run, run_id, lock=True)
+            run.config, run.config_hash = config_data, config_hash
+
+    def latest_run(self, name: str) -> RunRecord | None:
+        """Return the newest run of this name, whatever its state, or ``None``."""
+        query = select(Run).where(Run.name == name).order_by(Run.id.desc()).limit(1)
+        with self._read() as session:
+            run = session.scalars(query).first()
+            return None if run is None else to_record(RunRecord, run)
+
+    # ------------------------------------------------------------------ the run lease
+
+    @staticmethod
+    def _set_lease(run: Run, owner: LeaseOwner | None, now: Any) -> None:
+        run.lease_token = None if owner is None else owner.token
+        run.lease_pid = None if owner is None else owner.pid
+        run.lease_host = None if owner is None else owner.host
+        run.lease_heartbeat_at = None if owner is None else now
+
+    def take_lease(self, run_id: int, owner: LeaseOwner, stale: StaleCheck) -> str | None:
+        """Make ``owner`` the owner of a run, in one transaction (see :mod:`.leases`).
+
+        Returns
+        -------
+        str or None
+            ``None`` if the lease was free or already ``owner``'s; otherwise the description of
+            the stale owner it was taken from (also written as a ``run.lease`` event).
+
+        Raises
+        ------
+        LeaseHeld
+            Another process holds a lease that is not stale.
+        """
+        with self._write("take_lease") as session:
+            run = self._get(session, Run, run_id, lock=True)
+            now = utcnow()
+            previous = None
+            if run.lease_token is not None and run.lease_token != owner.token:
+                is_stale, why = stale.verdict(
+                    run.lease_pid, run.lease_host, run.lease_heartbeat_at, now
+                )
+                if not is_stale:
+                    raise LeaseHeld(
+                        run_id,
+                        run.lease_pid,
+                        run.lease_host,
+                        heartbeat_age(run.lease_heartbeat_at, now),
+                    )
+                previous = f"pid {run.lease_pid} on host {run.lease_host}"
+                session.add(
+                    Event(
+                        run_id=run_id,
+                        ts=now,
+                        kind="run.lease",
+                        source="store",
+                        message=f"lease taken over from {previous} by {owner.describe()}: {why}",
+                        data={
+                            "from": {"pid": run.lease_pid, "host": run.lease_host},
+                            "to": {"pid": owner.pid, "host": owner.host},
+                            "reason": why,
+                        },
+                    )
+                )
+            self._set_lease(run, owner, now)
+            return previous
+
+    def heartbeat(self, run_id: int, owner: LeaseOwner) -> None:
+        """Refresh the owner's heartbeat.
+
+        Raises
+        ------
+        LeaseLost
+            Another process has taken the lease.
+        """
+        with self._write("heartbeat") as session:
+            run = self._get(session, Run, run_id, lock=True)
+            if run.lease_token != owner.token:
+                raise LeaseLost(
+                    f"run {run_id}: the lease of {owner.describe()} was taken over by "
+                    f"pid {run.lease_pid} on host {run.lease_host}"
+                )
+            run.lease_heartbeat_at = utcnow()
+
+    def release_lease(self, run_id: int, owner: LeaseOwner) -> None:
+        """Give the lease up (a no-op if ``owner`` does not hold it)."""
+        with self._write("release_lease") as session:
+            run = self._get(session, Run, run_id, lock=True)
+            if run.lease_token == owner.token:
+                self._set_lease(run, None, None)
 
     def get_run(self, run_id: int) -> RunRecord:
         """Return the run ``run_id``; raise :class:`NotFound` if there is none."""
@@ -441,12 +550,14 @@ class Store:
         *,
         run_id: int | None = None,
         captured_at: datetime | None = None,
+        position: int | None = None,
     ) -> ImageRecord:
-        """Store an image of a plate and return it; idempotent by ``(run_id, sha256)``.
+        """Store an image of a plate and return it; idempotent by place or by content.
 
-        If the same image content (``sha256``) was already stored for the same run (or, with
-        ``run_id=None``, outside any run), that image is returned and nothing is written:
-        a run resuming after a crash finds its image, and what was stored about it, again.
+        With ``position`` (the plate's place in the run), an image already stored at that place
+        of the same run is returned and nothing is written. Without it, an image of the same
+        content (``sha256``) in the same run (or, with ``run_id=None``, outside any run) is
+        returned instead.
 
         Parameters
         ----------
@@ -457,36 +568,209 @@ class Store:
         width, height : int
             Size in pixels.
         sha256 : str
-            Hex SHA-256 of the image file (64 hex digits, any case; stored lowercase).
+            Hex SHA-256 of the image (64 hex digits, any case; stored lowercase).
         run_id : int, optional
             The run that captured it.
         captured_at : datetime, optional
             Aware capture time; now by default.
+        position : int, optional
+            The plate's place in the run (0, 1, ...).
         """
+        digest = self._check_image(sha256, width, height)
+        with self._write("add_image") as session:
+            image = self._add_image(
+                session, plate_id, path, width, height, digest, run_id, captured_at, position
+            )
+            return to_record(ImageRecord, image)
+
+    @staticmethod
+    def _check_image(sha256: str, width: int, height: int) -> str:
         digest = str(sha256).lower()
         if not _SHA256.fullmatch(digest):
             raise InvalidValue(f"image sha256 must be 64 hex digits, got {sha256!r}")
         if int(width) <= 0 or int(height) <= 0:
             raise InvalidValue(f"image size must be positive, got {width}x{height}")
-        with self._write("add_image") as session:
-            same_run = Image.run_id.is_(None) if run_id is None else Image.run_id == run_id
-            existing = session.scalars(
-                select(Image).where(same_run, Image.sha256 == digest)
-            ).first()
-            if existing is not None:
-                return to_record(ImageRecord, existing)
-            image = Image(
-                plate_id=plate_id,
-                run_id=run_id,
-                path=str(path),
-                width=int(width),
-                height=int(height),
-                sha256=digest,
-                captured_at=captured_at or utcnow(),
+        return digest
+
+    @staticmethod
+    def _add_image(
+        session: Session,
+        plate_id: int,
+        path: str,
+        width: int,
+        height: int,
+        digest: str,
+        run_id: int | None,
+        captured_at: datetime | None,
+        position: int | None,
+    ) -> Image:
+        same_run = Image.run_id.is_(None) if run_id is None else Image.run_id == run_id
+        same = Image.position == position if position is not None else Image.sha256 == digest
+        existing = session.scalars(select(Image).where(same_run, same)).first()
+        if existing is not None:
+            return existing
+        image = Image(
+            plate_id=plate_id,
+            run_id=run_id,
+            path=str(path),
+            width=int(width),
+            height=int(height),
+            sha256=digest,
+            captured_at=captured_at or utcnow(),
+            position=position,
+        )
+        session.add(image)
+        session.flush()
+        return image
+
+    def image_at(self, run_id: int, position: int) -> ImageRecord | None:
+        """Return the image stored at a place of a run, or ``None``."""
+        query = select(Image).where(Image.run_id == run_id, Image.position == position)
+        with self._read() as session:
+            image = session.scalars(query).first()
+            return None if image is None else to_record(ImageRecord, image)
+
+    def images_with_digest(self, run_id: int, sha256: str) -> list[ImageRecord]:
+        """Return a run's images whose pixels have this digest, by place."""
+        query = (
+            select(Image)
+            .where(Image.run_id == run_id, Image.sha256 == str(sha256).lower())
+            .order_by(Image.position, Image.id)
+        )
+        with self._read() as session:
+            return [to_record(ImageRecord, i) for i in session.scalars(query)]
+
+    def store_plate(
+        self,
+        run_id: int,
+        *,
+        position: int,
+        name: str,
+        source: str | None,
+        path: str,
+        width: int,
+        height: int,
+        sha256: str,
+        detections: Sequence[Mapping[str, Any]],
+        colonies: Sequence[Mapping[str, Any]],
+        picks: Sequence[Mapping[str, Any]],
+        events: Sequence[Mapping[str, Any]] = (),
+    ) -> StoredPlate:
+        """Store one plate of a run in ONE transaction: image, detections, colonies, picks.
+
+        A process killed at any moment leaves either all of it or none of it, so a resumed run
+        never finds a plate whose colonies are stored but whose picks are not.
+
+        Parameters
+        ----------
+        run_id : int
+            The run.
+        position : int
+            The plate's place in the run; a place already stored is refused.
+        name, source : str
+            The plate's label and where its image came from (see :meth:`add_plate`).
+        path, width, height, sha256
+            The image (see :meth:`add_image`).
+        detections : sequence of mappings
+            Detection rows (see :meth:`add_detections`).
+        colonies : sequence of mappings
+            Colony rows (see :meth:`add_colonies`); ``detection`` (optional) is the index in
+            ``detections`` of the colony's detection.
+        picks : sequence of mappings
+            Planned pick rows (see :meth:`plan_picks`) with ``colony`` (the index in
+            ``colonies``) instead of ``colony_id``.
+        events : sequence of mappings
+            Audit events written in the same transaction (``kind``, ``message``, optional
+            ``source`` and ``data``).
+
+        Raises
+        ------
+        InvalidValue
+            A bad row (names it), or the place is already stored.
+        """
+        if not name:
+            raise InvalidValue("plate name must not be empty")
+        digest = self._check_image(sha256, width, height)
+        detection_rows = [
+            DETECTION_ROW.normalise(i, _flatten_ellipse(row), {"run_id": run_id, "image_id": 0})
+            for i, row in enumerate(detections)
+        ]
+        colony_rows, detection_refs = [], []
+        for i, row in enumerate(colonies):
+            row = dict(row)
+            detection_refs.append(row.pop("detection", None))
+            values = COLONY_ROW.normalise(i, row, {"run_id": run_id, "image_id": 0})
+            try:
+                values["klass"] = ColonyClass(values["klass"])
+            except ValueError:
+                raise InvalidValue(
+                    f"colonies row {i}: klass {values['klass']!r} is not one of "
+                    f"{[c.value for c in ColonyClass]}"
+                ) from None
+            colony_rows.append(values)
+        pick_refs = []
+        for i, row in enumerate(picks):
+            ref = row.get("colony")
+            if not isinstance(ref, int) or not 0 <= ref < len(colony_rows):
+                raise InvalidValue(f"picks row {i}: 'colony' must index the colonies, got {ref!r}")
+            pick_refs.append(ref)
+        with self._write("store_plate") as session:
+            self._get(session, Run, run_id)
+            taken = session.scalar(
+                select(Image.id).where(Image.run_id == run_id, Image.position == position)
             )
-            session.add(image)
-            session.flush()
-            return to_record(ImageRecord, image)
+            if taken is not None:
+                raise InvalidValue(f"run {run_id}: plate {position} is stored already")
+            plate = session.scalars(select(Plate).where(Plate.name == name)).first()
+            if plate is None:
+                plate = Plate(name=name, source=source)
+                session.add(plate)
+                session.flush()
+            image = self._add_image(
+                session, plate.id, path, width, height, digest, run_id, None, position
+            )
+            for row in detection_rows:
+                row["image_id"] = image.id
+            detection_ids = (
+                self._insert_returning_ids(session, Detection, detection_rows)
+                if detection_rows
+                else []
+            )
+            for row, ref in zip(colony_rows, detection_refs, strict=True):
+                row["image_id"] = image.id
+                if ref is not None:
+                    row["detection_id"] = detection_ids[ref]
+            colony_ids = (
+                self._insert_returning_ids(session, Colony, colony_rows) if colony_rows else []
+            )
+            last = session.scalar(select(func.max(Pick.sequence)).where(Pick.run_id == run_id))
+            sequence = 0 if last is None else last + 1
+            now = utcnow()
+            pick_rows = []
+            for i, (row, ref) in enumerate(zip(picks, pick_refs, strict=True)):
+                fields = {k: v for k, v in row.items() if k not in ("colony", "sequence")}
+                values = PICK_ROW.normalise(
+                    i,
+                    {**fields, "colony_id": colony_ids[ref]},
+                    {"run_id": run_id, "state": PickState.PLANNED, "needs_attention": False},
+                )
+                values = _pick_fields(values, f"picks row {i}")
+                values.update(sequence=sequence, created_at=now, updated_at=now)
+                sequence += 1
+                pick_rows.append(values)
+            pick_ids = self._insert_returning_ids(session, Pick, pick_rows) if pick_rows else []
+            for event in events:
+                session.add(
+                    Event(
+                        run_id=run_id,
+                        ts=now,
+                        kind=event["kind"],
+                        source=event.get("source", "orchestrator"),
+                        message=event["message"],
+                        data=json_data(event.get("data"), f"event {event['kind']!r} data"),
+                    )
+                )
+            return StoredPlate(plate.id, image.id, detection_ids, colony_ids, pick_ids)
 
     def get_image(self, image_id: int) -> ImageRecord:
         """Return the image ``image_id``; raise :class:`NotFound` if there is none."""

@@ -7,13 +7,17 @@ Run states (the style of Opentrons' engine and Bluesky's RunEngine)::
 
     idle -> running -> paused -> running          (pause at a safe checkpoint, resume)
             running -> stopping -> stopped        (stop with cleanup; also from paused)
-            running -> succeeded
+            running -> succeeded                  (every pick analysed)
+            running -> completed_with_errors      (all work done, some picks failed/unknown)
             running -> running                    (resume a run that crashed while running)
     idle | running | paused | stopping -> failed  (an error can happen in any live state)
+    failed -> running                             (the operator resumes it: --resume ID)
 
 Choice: ``failed`` is reachable from every unfinished state (not only from
 ``running``), so a fault during a pause, during cleanup or before the start can be recorded as
-what it is. ``stopped``, ``failed`` and ``succeeded`` are final.
+what it is. ``stopped``, ``succeeded`` and ``completed_with_errors`` are final; ``failed`` is
+final for the automatic resume (a new ``labauto run`` never resumes it silently) but the
+operator may resume it explicitly, which moves it back to ``running``.
 
 Pick states::
 
@@ -42,6 +46,7 @@ class RunState(StrEnum):
     STOPPED = "stopped"
     FAILED = "failed"
     SUCCEEDED = "succeeded"
+    COMPLETED_WITH_ERRORS = "completed_with_errors"
 
 
 class PickState(StrEnum):
@@ -73,20 +78,30 @@ RUN_TRANSITIONS: dict[RunState, frozenset[RunState]] = {
             RunState.STOPPING,
             RunState.FAILED,
             RunState.SUCCEEDED,
+            RunState.COMPLETED_WITH_ERRORS,
         }
     ),
     RunState.PAUSED: frozenset({RunState.RUNNING, RunState.STOPPING, RunState.FAILED}),
     RunState.STOPPING: frozenset({RunState.STOPPED, RunState.FAILED}),
     RunState.STOPPED: frozenset(),
-    RunState.FAILED: frozenset(),
+    RunState.FAILED: frozenset({RunState.RUNNING}),  # resumed by the operator (--resume ID)
     RunState.SUCCEEDED: frozenset(),
+    RunState.COMPLETED_WITH_ERRORS: frozenset(),
 }
 """For each run state, the states it may move to."""
 
 RUN_FINAL_STATES: frozenset[RunState] = frozenset(
-    s for s, nxt in RUN_TRANSITIONS.items() if not nxt
+    {RunState.STOPPED, RunState.FAILED, RunState.SUCCEEDED, RunState.COMPLETED_WITH_ERRORS}
 )
-"""Run states a run never leaves: stopped, failed, succeeded."""
+"""Run states that end a run: stopped, failed, succeeded, completed_with_errors.
+
+All but ``failed`` are never left; a failed run can be resumed by the operator
+(:data:`RUN_RESUMABLE_STATES`)."""
+
+RUN_RESUMABLE_STATES: frozenset[RunState] = frozenset(
+    {RunState.IDLE, RunState.RUNNING, RunState.PAUSED, RunState.STOPPING, RunState.FAILED}
+)
+"""Run states from which ``labauto run --resume ID`` may go on."""
 
 PICK_TRANSITIONS: dict[PickState, frozenset[PickState]] = {
     PickState.PLANNED: frozenset({PickState.MOVING, PickState.FAILED}),

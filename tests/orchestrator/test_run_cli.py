@@ -55,6 +55,8 @@ def test_a_second_run_is_new_and_control_of_a_finished_run_is_refused(config_fil
 
 
 def test_show_of_an_unknown_run_is_a_clear_error(config_file, capsys):
+    assert main(["db", "upgrade", "--config", str(config_file)]) == 0
+    capsys.readouterr()
     assert main(["runs", "show", "99", "--config", str(config_file)]) == 1
     err = capsys.readouterr().err
     assert err.startswith("labauto: error:") and "99" in err

@@ -14,12 +14,13 @@ from labauto.store import InvalidTransition, InvalidValue, PickState, RunState, 
 
 RUN_ALLOWED = {
     "idle": {"running", "failed"},
-    "running": {"running", "paused", "stopping", "failed", "succeeded"},
+    "running": {"running", "paused", "stopping", "failed", "succeeded", "completed_with_errors"},
     "paused": {"running", "stopping", "failed"},
     "stopping": {"stopped", "failed"},
     "stopped": set(),
-    "failed": set(),
+    "failed": {"running"},  # the operator resumes a failed run (--resume ID)
     "succeeded": set(),
+    "completed_with_errors": set(),
 }
 RUN_PATH = {  # how to reach each state from idle
     "idle": [],
@@ -29,6 +30,7 @@ RUN_PATH = {  # how to reach each state from idle
     "stopped": ["running", "stopping", "stopped"],
     "failed": ["failed"],
     "succeeded": ["running", "succeeded"],
+    "completed_with_errors": ["running", "completed_with_errors"],
 }
 PICK_ALLOWED = {
     "planned": {"moving", "failed"},
