@@ -46,9 +46,7 @@ def test_defaults_describe_a_simulated_workcell():
         ("detector:\n  statistic: mode\n", "detector.statistic: expected 'median' or 'mean'"),
         ("picking:\n  order: random\n", "picking.order: expected 'largest'"),
         ("plate:\n  detector:\n    bogus: 1\n", "plate.detector.bogus: unknown key"),
-        ("plate:
-  min_width_mm: -5
-", "plate.min_width_mm: expected a value >= 0, got -5"),
+        ("plate:\n  min_width_mm: -5\n", "plate.min_width_mm: expected a value >= 0, got -5"),
         (
             "plate:\n  region: [1, 2]\n",
             "plate.region: expected one of: tuple[float, float, float]; "
