@@ -49,8 +49,11 @@ Pipeline and the choices it makes where the paper leaves room:
 5. **Merged count.** Peaks of the merged body's distance transform (one per plateau), kept
    greedily from the highest; a peak is a new colony when the distance transform along the
    straight segment to every peak already kept dips below ``valley_ratio`` times the lower peak
-   (a waist). At least 2. Compact clumps of three whose members overlap deeply are the usual
-   miss (counted 2).
+   (a waist). At least 1: a body that is not a DES yet shows a single peak is one colony whose
+   shape cannot be read as a DES (small colonies of a few pixels, irregular edges on real
+   plates). It stays in the class ``merged`` (never offered for picking) with
+   ``estimated_count`` 1; forcing 2 here over-counted small colonies on real plates by up to a
+   third. Compact clumps of three whose members overlap deeply are the usual miss (counted 2).
 
 Coordinates: pixels, origin at the centre of the top-left pixel, x right, y down.
 """
@@ -100,6 +103,7 @@ _SOBEL5_DERIV = np.array([-1.0, -2.0, 0.0, 2.0, 1.0], np.float32)
 _SOBEL5_X = np.outer(_SOBEL5_SMOOTH, _SOBEL5_DERIV).ravel()  # rows: dy, cols: dx
 _SOBEL5_Y = np.outer(_SOBEL5_DERIV, _SOBEL5_SMOOTH).ravel()
 _DY5, _DX5 = (g.ravel() for g in np.mgrid[-2:3, -2:3])
+_MIN_MERGED_COUNT = 1  # a body that is not a DES but shows one peak: one colony, not pickable
 _PAD = 3  # margin (px) around a body's mask; bodies this close to the usable border are dropped
 _DISC5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
 
@@ -323,7 +327,8 @@ class Colony:
     d_alpha_median : float
         Median shape angle D_alpha in degrees.
     estimated_count : int
-        Colonies in the body (1 for authentic and mixed).
+        Colonies in the body (1 for authentic and mixed; for merged, the peaks of its distance
+        transform: 1 when it is one colony whose shape is not a DES).
     contour : ndarray, shape (n, 2)
         Outline ``(x, y)`` in image pixels.
     mix_score : float
@@ -757,12 +762,13 @@ def _merged_counts(bodies: _Bodies, which: np.ndarray, valley_ratio: float) -> n
     taken greedily from the highest (plateaus of equal height in the order OpenCV labels a
     crop: by their first 2x2 block in raster order), and a peak is kept when the straight
     segment to every peak kept before it dips below ``valley_ratio`` times the lower of the
-    two. At least 2. The segments between all pairs of peaks of a body are sampled at once.
+    two. At least ``_MIN_MERGED_COUNT`` (1). The segments between all pairs of peaks of a body
+    are sampled at once.
     """
     counts = np.ones(len(bodies.index), np.intp)
     if not which.any():
         return counts
-    counts[which] = 2
+    counts[which] = _MIN_MERGED_COUNT
     # a smaller canvas of only these bodies' slots (the layout's rules still hold)
     slot = np.diff(np.append(bodies.row, len(bodies.row_body)))
     rows = which[np.repeat(np.arange(len(slot)), slot)]
@@ -819,7 +825,7 @@ def _merged_counts(bodies: _Bodies, which: np.ndarray, valley_ratio: float) -> n
         for j in range(lo, hi):
             if not joined_to.get(j, set()).intersection(kept):
                 kept.append(j)
-        counts[body[lo]] = max(2, len(kept))
+        counts[body[lo]] = max(_MIN_MERGED_COUNT, len(kept))
     return counts
 
 

@@ -74,7 +74,7 @@ def _reference_merged_count(dt: np.ndarray, valley_ratio: float) -> int:
                 break
         if separate:
             kept.append((px, py, pv))
-    return max(2, len(kept))
+    return max(plate_module._MIN_MERGED_COUNT, len(kept))
 
 
 def _reference_mix_score(roi: np.ndarray, body: dict, params: PlateParams) -> float:
