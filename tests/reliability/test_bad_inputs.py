@@ -36,7 +36,7 @@ CONFIG_CASES = {
     ),
     "unknown analyzer fault": "analyzer:\n  simulator:\n    faults: {meteor: 1}\n",
     "NaN plate value": "plate:\n  min_colony_area_px: .nan\n",
-    "negative plate value": "plate:\n  background_scale: -3\n",
+    "negative plate value": "plate:\n  min_width_mm: -3\n",
     "plate range upside down": "plate:\n  dish_radius_range: [0.6, 0.2]\n",
     "canny_low > canny_high": "detector:\n  canny_low: 200\n  canny_high: 100\n",
     "NaN calibration point": "calibration:\n  points:\n"
@@ -55,7 +55,7 @@ EXPECTED = {
     "gantry fault with a bad count": "count: expected a value >= 1, got 0",
     "unknown analyzer fault": "analyzer.simulator.faults: unknown fault 'meteor'",
     "NaN plate value": "plate.min_colony_area_px: expected a finite number, got nan",
-    "negative plate value": "plate.background_scale: expected a value >= 0, got -3",
+    "negative plate value": "plate.min_width_mm: expected a value >= 0, got -3",
     "plate range upside down": "plate.dish_radius_range: expected [low, high] with low <= high",
     "canny_low > canny_high": "detector: canny_low (200) must not exceed canny_high (100)",
     "NaN calibration point": "calibration.points.0.pixel.1: expected a finite number, got nan",
