@@ -145,6 +145,7 @@ def hysteresis(dev: np.ndarray, usable: np.ndarray, high: float, low: float) -> 
 
 
 _RIM_SECTORS = 36  # sectors of 10 degrees: the radial profile is a median over each
+_RIM_ANGLES = 720  # angles sampled round the band (20 per sector)
 
 
 def with_radial_rim(
@@ -155,39 +156,71 @@ def with_radial_rim(
     Near the wall the agar's colour changes within a millimetre or two (the meniscus: a bright
     or dark ring), faster than the cell estimate can follow; eq. 1 then sees the ring as one
     body that swallows every colony touching it. The meniscus is (nearly) the same all round,
-    so the dish is unwrapped to polar coordinates (``cv2.warpPolar``, 1 px per radius step,
-    1440 angles) and, in each 10-degree sector, the median over the angles at every radius is
-    the background there: colonies cover far less than half of a sector's arc at any radius.
-    Sector medians are interpolated between sector centres (cyclically), wrapped back, and
-    blended in over the outer ``band_px`` of the circle ``rim = (cx, cy, r)`` (full weight in
-    the outer two thirds of the band, ramping over its inner third).
+    so the band is unwrapped to polar coordinates (``cv2.remap``, 1 px per radius step, 720
+    angles) and, in each 10-degree sector, the median over the angles at every radius is the
+    background there: colonies cover far less than half of a sector's arc at any radius.
+    Sector medians are interpolated between sector centres (cyclically), looked up at every
+    pixel of the band, and blended in over the outer ``band_px`` of the circle
+    ``rim = (cx, cy, r)`` (full weight in the outer two thirds of the band, ramping over its
+    inner third). Only the band's pixels are touched.
     """
     h, w = background.shape[:2]
-    cx, cy, r = rim
-    r_max = r + 2.0
-    n_r, n_t = max(math.ceil(r_max), 2), 1440
-    polar = cv2.warpPolar(
-        image, (n_r, n_t), (cx, cy), r_max, cv2.WARP_POLAR_LINEAR | cv2.INTER_LINEAR
-    )
-    r0 = max(int(r - band_px) - 2, 0)
-    band = polar[:, r0:]
+    cx, cy, r = (float(v) for v in rim)
+    r0 = max(r - band_px - 2.0, 0.0)
+    n_r, n_t = max(math.ceil(r + 2.0 - r0), 2), _RIM_ANGLES
+    theta = np.arange(n_t, dtype=np.float32) * np.float32(2 * np.pi / n_t)
+    radii = r0 + np.arange(n_r, dtype=np.float32)
+    map_x = (cx + np.cos(theta)[:, None] * radii[None, :]).astype(np.float32)
+    map_y = (cy + np.sin(theta)[:, None] * radii[None, :]).astype(np.float32)
+    band = cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     per = n_t // _RIM_SECTORS
-    medians = np.median(band.reshape(_RIM_SECTORS, per, band.shape[1], 3), axis=1)
-    # interpolate between sector centres, cyclically, back to every angle
-    ring = np.concatenate((medians[-1:], medians, medians[:1])).astype(np.float32)
-    profile = cv2.resize(
-        ring, (band.shape[1], (_RIM_SECTORS + 2) * per), interpolation=cv2.INTER_LINEAR
-    )
-    profile = profile[per : per + n_t]
-    full = np.zeros((n_t, n_r, 3), np.float32)
-    full[:, r0:] = profile
-    radial = cv2.warpPolar(
-        full, (w, h), (cx, cy), r_max,
-        cv2.WARP_POLAR_LINEAR | cv2.WARP_INVERSE_MAP | cv2.INTER_LINEAR,
-    )  # fmt: skip
-    ys, xs = np.ogrid[:h, :w]
-    dist = np.sqrt((xs - cx) ** 2 + (ys - cy) ** 2, dtype=np.float32)
-    weight = np.clip((dist - (r - band_px)) / max(band_px / 3.0, 1.0), 0.0, 1.0)[..., None]
-    radial = np.nan_to_num(radial, copy=False)
-    out = background.astype(np.float32) * (1.0 - weight) + radial * weight
-    return cv2.convertScaleAbs(out)
+    medians = np.median(band.reshape(_RIM_SECTORS, per, n_r, 3), axis=1).astype(np.float32)
+    # sector centres, cyclically: row k of ``ring`` is the centre of sector k - 1
+    ring = np.concatenate((medians[-1:], medians, medians[:1]))
+    # the band's pixels (flat indices), as (radius, angle) into the sector-median table
+    idx = np.flatnonzero(_annulus(h, w, cx, cy, r0 + 2.0, r + 2.0))
+    if idx.size == 0:
+        return background
+    ys, xs = np.divmod(idx, w)
+    dist, angle = (
+        v.ravel()
+        for v in cv2.cartToPolar(
+            xs.astype(np.float32) - np.float32(cx), ys.astype(np.float32) - np.float32(cy)
+        )
+    )  # angle in [0, 2 pi)
+    # row of ``ring``: sector k's centre (angle (k + 0.5) * 10 deg) is row k + 1
+    sector = angle * np.float32(_RIM_SECTORS / (2 * np.pi)) + np.float32(0.5)
+    lookup = _bilinear(ring, dist - np.float32(r0), sector)
+    weight = (dist - np.float32(r - band_px)) * np.float32(1.0 / max(band_px / 3.0, 1.0))
+    np.clip(weight, 0.0, 1.0, out=weight)
+    out = background.copy()
+    flat = out.reshape(-1, 3)
+    here = flat[idx].astype(np.float32)
+    here += (lookup - here) * weight[:, None]
+    flat[idx] = cv2.convertScaleAbs(here.reshape(-1, 1, 3)).reshape(-1, 3)
+    return out
+
+
+def _bilinear(table: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``table`` (rows x cols x 3) sampled at ``(x, y)`` (col, row), bilinear, edges clamped.
+
+    ``cv2.remap`` does the same but limits its output to 32767 rows or columns; the band of a
+    large dish holds more pixels, so they go through it as rows of 4096.
+    """
+    n = x.size
+    cols = 4096
+    rows = -(-n // cols)
+    pad = rows * cols - n
+    mx = np.pad(x.astype(np.float32), (0, pad)).reshape(rows, cols)
+    my = np.pad(y.astype(np.float32), (0, pad)).reshape(rows, cols)
+    out = cv2.remap(table, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(-1, table.shape[2])[:n]
+
+
+def _annulus(h: int, w: int, cx: float, cy: float, r_in: float, r_out: float) -> np.ndarray:
+    """uint8 mask of the ring ``r_in <= |p - c| < r_out`` (drawn, 1/16 px precision)."""
+    mask = np.zeros((h, w), np.uint8)
+    centre = (round(cx * 16), round(cy * 16))
+    cv2.circle(mask, centre, round(r_out * 16), 255, -1, cv2.LINE_8, 4)
+    cv2.circle(mask, centre, round(max(r_in, 0.0) * 16), 0, -1, cv2.LINE_8, 4)
+    return mask
