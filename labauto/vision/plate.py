@@ -76,6 +76,7 @@ from labauto.vision.plate_background import (
     deviation,
     hysteresis,
     local_background,
+    open_thin_lines,
     with_radial_rim,
 )
 from labauto.vision.plate_ink import ink_bodies
@@ -146,6 +147,10 @@ class PlateParams:
         ``t`` is at least this many times the agar's median deviation (its noise); 0: off.
     low_ratio : float
         Hysteresis: a body's pixels need only ``low_ratio * t`` when it holds one above ``t``.
+    open_mm : float
+        The foreground is opened with a disc of this diameter: thinner lines (the lid's and the
+        wall's edges, scratches, hairs) are removed and colonies touching them come apart;
+        0 turns it off.
     channel_weights : tuple of float
         Weights of the B, G, R squared deviations in eq. 1.
     background_cell_mm, background_scale : float, int
@@ -204,6 +209,7 @@ class PlateParams:
     color_threshold: float = 600.0
     noise_factor: float = 0.0
     low_ratio: float = 1.0
+    open_mm: float = 0.75
     channel_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)
     background_cell_mm: float = 0.8
     background_scale: int | None = None
@@ -232,6 +238,7 @@ class PlateParams:
         non_negative = (
             "color_threshold",
             "noise_factor",
+            "open_mm",
             "analysis_px_per_mm",
             "min_colony_diameter_mm",
             "min_colony_area_px",
@@ -963,6 +970,12 @@ def _objects_by_segmentation(
     dev = deviation(roi, background, params.channel_weights)
     t = adaptive_threshold(dev, usable, params.color_threshold, params.noise_factor)
     fg = hysteresis(dev, usable, t, params.low_ratio * t)
+    if params.open_mm > 0:
+        # lines thinner than open_mm (the lid's and the wall's edges, scratches, hairs) go, so
+        # colonies touching them come apart from them
+        k = 2 * math.floor(params.open_mm * float(params.px_per_mm or 0.0) / 2) + 1  # odd
+        if k >= 3:
+            fg = open_thin_lines(fg, k)
     # outer boundaries of every body, also of bodies lying in another's hole (a colony inside
     # the meniscus ring): RETR_CCOMP puts all outer boundaries at the top level
     traced, hierarchy = cv2.findContours(fg, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)

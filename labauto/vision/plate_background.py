@@ -224,3 +224,31 @@ def _annulus(h: int, w: int, cx: float, cy: float, r_in: float, r_out: float) ->
     cv2.circle(mask, centre, round(r_out * 16), 255, -1, cv2.LINE_8, 4)
     cv2.circle(mask, centre, round(max(r_in, 0.0) * 16), 0, -1, cv2.LINE_8, 4)
     return mask
+
+
+_FRAGMENT_RATIO = 0.5  # a piece is a fragment when the opening took this much around it
+
+
+def open_thin_lines(fg: np.ndarray, size: int) -> np.ndarray:
+    """``fg`` opened with a disc of ``size`` px, without the fragments of thick strokes.
+
+    The opening removes what is thinner than the disc: the lid's and the wall's edges, hairs,
+    scratches, so that colonies touching them come apart from them. A thick pen stroke or a
+    label's bar is not removed whole: the opening leaves pieces where it is widest. A piece is
+    such a fragment when the pixels the opening removed within ``size`` px around it outnumber
+    ``_FRAGMENT_RATIO`` of its own area (a colony that a line crossed loses a few line pixels
+    around it; a piece of a stroke is flanked by the rest of the stroke) and is dropped.
+    """
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+    opened = cv2.morphologyEx(fg, cv2.MORPH_OPEN, disc)
+    removed = cv2.compare(fg, opened, cv2.CMP_GT)
+    n, labels = cv2.connectedComponents(opened, connectivity=8)
+    if n <= 1 or not removed.any():
+        return opened
+    around = cv2.dilate(labels.astype(np.float32), disc).astype(np.int32)  # nearest piece's label
+    near = np.bincount(around[removed > 0], minlength=n)
+    area = np.bincount(labels.ravel(), minlength=n)
+    keep = np.full(n, 255, np.uint8)
+    keep[0] = 0
+    keep[near > _FRAGMENT_RATIO * area] = 0
+    return keep[labels]

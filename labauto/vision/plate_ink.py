@@ -7,9 +7,9 @@ colonies of the real plates we measured (cream, yellow, brown, olive, white) in 
 
 * **Colour.** Black ink takes away a like share of every channel of the agar seen through it,
   blue ink more of red than of blue. Pigmented and turbid colonies take away more blue than red
-  (short wavelengths first). A body is ink-coloured when it is darker than its agar by at least
-  10 % (mean relative change over B, G, R) and its relative change in blue is no more negative
-  than in red, less 1 %.
+  (short wavelengths first). A body is ink-coloured when it lets through at least 10 % less
+  light than its agar (B + G + R summed) and its relative change in blue is no more negative
+  than in red, less 1 % (blue ink on red agar: red falls, blue may even rise).
 * **Shape or texture.** An ink-coloured body is ink when it is also a stroke (its area over 3.5
   inscribed discs; or narrower than 1.6 mm and over two discs; or narrower than 1 mm, a dot or
   a pen line) or dotted: fewer than 75 % of its pixels take at least half its mean darkening
@@ -30,7 +30,7 @@ INK_DARKER = -0.10  # least mean relative darkening of an ink body
 INK_BLUE_MARGIN = -0.01  # ink's relative change in blue minus that in red is at least this
 INK_FILL = 3.5  # a stroke: area over this many inscribed discs ...
 INK_STROKE_MM = 1.6  # ... or narrower than this and over two discs ...
-INK_DOT_MM = 1.0  # ... or narrower than this, whatever its shape
+INK_DOT_MM = 1.3  # ... or narrower than this, whatever its shape
 INK_SOLID = 0.75  # a dotted body has fewer of its pixels this dark (relative to its mean)
 
 
@@ -64,11 +64,12 @@ def ink_bodies(
             continue
         colour = roi[t : t + h, lft : lft + w][inside].astype(np.float32)
         agar = np.maximum(background[t : t + h, lft : lft + w][inside].astype(np.float32), 1.0)
-        rel = colour / agar - 1.0  # per pixel: B, G, R
-        mean = rel.mean(axis=0)
-        if not (mean.mean() <= INK_DARKER and mean[0] - mean[2] >= INK_BLUE_MARGIN):
+        rel = colour.mean(axis=0) / agar.mean(axis=0) - 1.0  # B, G, R
+        # darker in all: the light that comes through, summed over B, G, R, per pixel
+        darkening = 1.0 - colour.sum(axis=1) / agar.sum(axis=1)
+        dark = float(darkening.mean())
+        if not (dark >= -INK_DARKER and rel[0] - rel[2] >= INK_BLUE_MARGIN):
             continue
-        darkening = -rel.mean(axis=1)
-        dotted = np.mean(darkening >= 0.5 * -mean.mean()) < INK_SOLID
+        dotted = np.mean(darkening >= 0.5 * dark) < INK_SOLID
         out[b] = bool(strokelike[b] or dotted)
     return out
