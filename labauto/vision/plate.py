@@ -281,9 +281,7 @@ class PlateParams:
             )
         scale = self.background_scale
         if scale is not None and (int(scale) != scale or scale < 1):
-            raise ValueError(
-                f"PlateParams.background_scale must be an integer >= 1, got {scale!r}"
-            )
+            raise ValueError(f"PlateParams.background_scale must be an integer >= 1, got {scale!r}")
         lo, hi = self.dish_radius_range
         if not 0 < lo < hi <= 1:
             raise ValueError(
