@@ -72,10 +72,11 @@ def find_dish(image: np.ndarray, radius_range: tuple[float, float] = (0.30, 0.50
 
     A Hough circle on a grey image subsampled to ~128 px gives a first guess. Along rays at full
     resolution the agar's edge is the first place, going outward, where the colour departs from
-    the agar's by more than 18 grey levels (the meniscus or the wall); it is located at half the
-    height of that first peak, with sub-pixel interpolation. A least-squares circle is fitted to
-    the edge points of all rays (+-40 px around the first guess), dropping outliers (labels, pen
-    marks, colonies near the wall) in three rounds.
+    the agar's by more than 18 grey levels and stays so for about a millimetre (r / 45: the
+    meniscus or the wall, not a thin line of the lid); it is located at half the height of that
+    first peak, with sub-pixel interpolation. A least-squares circle is fitted to the edge
+    points of all rays (+-40 px, and at least +-6 % of the radius, around the first guess),
+    dropping outliers (labels, pen marks, colonies near the wall) in three rounds.
 
     Parameters
     ----------
@@ -98,7 +99,10 @@ def find_dish(image: np.ndarray, radius_range: tuple[float, float] = (0.30, 0.50
     if guess is None:
         raise ValueError("no petri dish found in the image; set PlateParams.region to the dish")
     cx, cy, r = guess
-    cx, cy, r = _refine_dish(img, cx, cy, r, n_rays=180, reach=40.0, step=1.0)
+    # +-40 px, and at least +-6 % of the radius (~2.7 mm on any image): the Hough circle of a
+    # high-resolution photo may sit on a line of the lid a few millimetres off the agar's edge
+    reach = max(40.0, 0.06 * r)
+    cx, cy, r = _refine_dish(img, cx, cy, r, n_rays=180, reach=reach, step=max(1.0, r / 900))
     return Dish((cx, cy), r)
 
 
@@ -154,8 +158,16 @@ def _refine_dish(
     diff = prof - ref[:, None, :]
     dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
     rows = np.arange(n_rays)
-    first = np.argmax(dist >= _DISH_EDGE_CONTRAST, axis=1)
-    ok = (dist[rows, first] >= _DISH_EDGE_CONTRAST) & (first > 0)
+    # the edge is where the colour leaves the agar's for good: a departure that lasts at least
+    # ~1 mm (r / 45) going outward; thin lines of the lid or the meniscus come back to the
+    # agar's colour within a few pixels and are passed
+    run = max(round(r / 45.0 / step), 1)
+    departed = (dist >= _DISH_EDGE_CONTRAST).astype(np.int32)
+    window = np.cumsum(np.pad(departed, ((0, 0), (1, 0))), axis=1)
+    lasting = np.zeros_like(departed, bool)
+    lasting[:, : departed.shape[1] - run + 1] = (window[:, run:] - window[:, :-run]) == run
+    first = np.argmax(lasting, axis=1)
+    ok = lasting[rows, first] & (first > 0)
     # height of the first peak: the largest distance within 3 px after the first crossing
     win = first[:, None] + np.arange(round(3.0 / step) + 1)[None, :]
     peak = dist[rows[:, None], np.minimum(win, dist.shape[1] - 1)].max(axis=1)
