@@ -138,22 +138,29 @@ def run_agar_boxes(folder: Path, only: set[str], params: PlateParams | None) -> 
     reported, truth, matched = totals
     p = matched / reported if reported else 0.0
     r = matched / truth if truth else 0.0
-    summary = {
+    summary = {"precision": p, "recall": r, "f1": _f1(p, r), **_count_summary(errors, times)}
+    print(
+        f"total: {summary['plates']} plates, {truth} colonies, {reported} reported, {matched} "
+        f"matched: precision {p:.3f}, recall {r:.3f}, F1 {summary['f1']:.3f}; "
+        + _count_line(summary)
+    )
+    return summary
+
+
+def _count_summary(errors: list[float], times: list[float]) -> dict[str, float]:
+    return {
         "plates": len(errors),
-        "precision": p,
-        "recall": r,
-        "f1": _f1(p, r),
         "median_count_error": float(np.median(errors)) if errors else float("nan"),
         "over_15": sum(e > 0.15 for e in errors),
         "max_ms": max(times, default=0.0),
     }
-    print(
-        f"total: {summary['plates']} plates, {truth} colonies, {reported} reported, {matched} "
-        f"matched: precision {p:.3f}, recall {r:.3f}, F1 {summary['f1']:.3f}; median count "
-        f"error {100 * summary['median_count_error']:.1f} %, {summary['over_15']} plates over "
-        f"15 %; slowest {summary['max_ms']:.0f} ms"
+
+
+def _count_line(summary: dict[str, float]) -> str:
+    return (
+        f"median count error {100 * summary['median_count_error']:.1f} %, "
+        f"{summary['over_15']} plates over 15 %; slowest {summary['max_ms']:.0f} ms"
     )
-    return summary
 
 
 def run_phone_counts(folder: Path, only: set[str], params: PlateParams | None) -> dict[str, float]:
@@ -182,17 +189,8 @@ def run_phone_counts(folder: Path, only: set[str], params: PlateParams | None) -
             + (f"  ({why})" if why else "")
             + note
         )
-    summary = {
-        "plates": len(errors),
-        "median_count_error": float(np.median(errors)) if errors else float("nan"),
-        "over_15": sum(e > 0.15 for e in errors),
-        "max_ms": max(times, default=0.0),
-    }
-    print(
-        f"total: {summary['plates']} plates: median count error "
-        f"{100 * summary['median_count_error']:.1f} %, {summary['over_15']} plates over 15 %; "
-        f"slowest {summary['max_ms']:.0f} ms"
-    )
+    summary = _count_summary(errors, times)
+    print(f"total: {summary['plates']} plates: " + _count_line(summary))
     return summary
 
 
