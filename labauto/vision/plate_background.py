@@ -242,13 +242,16 @@ def open_thin_lines(fg: np.ndarray, size: int) -> np.ndarray:
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
     opened = cv2.morphologyEx(fg, cv2.MORPH_OPEN, disc)
     removed = cv2.compare(fg, opened, cv2.CMP_GT)
-    n, labels = cv2.connectedComponents(opened, connectivity=8)
-    if n <= 1 or not removed.any():
+    if not removed.any():
         return opened
-    around = cv2.dilate(labels.astype(np.float32), disc).astype(np.int32)  # nearest piece's label
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(opened, connectivity=8)
+    if n <= 1 or n > np.iinfo(np.uint16).max:
+        return opened
+    # the piece within ``size`` px of every removed pixel (16-bit dilation of the labels)
+    around = cv2.dilate(labels.astype(np.uint16), disc)
     near = np.bincount(around[removed > 0], minlength=n)
-    area = np.bincount(labels.ravel(), minlength=n)
-    keep = np.full(n, 255, np.uint8)
-    keep[0] = 0
-    keep[near > _FRAGMENT_RATIO * area] = 0
-    return keep[labels]
+    fragment = near > _FRAGMENT_RATIO * stats[:, cv2.CC_STAT_AREA]
+    fragment[0] = False
+    if fragment.any():
+        opened[fragment[labels]] = 0
+    return opened
