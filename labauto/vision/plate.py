@@ -231,7 +231,7 @@ class PlateParams:
     valley_ratio: float = 0.9
     reject_ink: bool = True
     drop_at_border: bool = False
-    rim_band_mm: float = 6.0
+    rim_band_mm: float = 4.0
     detector: DetectorParams = field(default_factory=lambda: DetectorParams(method="color"))
 
     def __post_init__(self) -> None:

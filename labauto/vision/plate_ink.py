@@ -11,7 +11,7 @@ colonies of the real plates we measured (cream, yellow, brown, olive, white) in 
   light than its agar (B + G + R summed) and its relative change in blue is no more negative
   than in red, less 1 % (blue ink on red agar: red falls, blue may even rise).
 * **Shape or texture.** An ink-coloured body is ink when it is also a stroke (its area over 3.5
-  inscribed discs; or narrower than 1.6 mm and over two discs; or narrower than 1 mm, a dot or
+  inscribed discs; or narrower than 1.6 mm and over two discs; or narrower than 1.3 mm, a dot or
   a pen line) or dotted: fewer than 75 % of its pixels take at least half its mean darkening
   (the agar between printed dots; a colony is dark all over, dome shading included).
 
