@@ -107,6 +107,8 @@ _SETTLE_S = 0.05
 #: GRBL sleeps 500 ms after printing ``ALARM:N`` (``report_alarm_message``); margin for a slow host.
 _ALARM_DELAY_S = 1.0
 _RESET_MESSAGE = "[MSG:Reset to continue]"
+#: How long to wait for the answer to a ``$I`` that a booting board may have dropped.
+_SECOND_ANSWER_S = 0.5
 
 _REALTIME_NAMES = {STATUS_QUERY: "?", FEED_HOLD: "!", CYCLE_START: "~", SOFT_RESET: "^X"}
 
@@ -516,6 +518,27 @@ class GrblRobot:
                 values[int(number)] = value
         return values
 
+    def execute(self, line: str, *, timeout: float | None = None) -> list[str]:
+        """Send one raw line (``$10=0``, ``G10 L2 P1 X-5``, ``$N0=...``) and wait for its ``ok``.
+
+        For set-up and maintenance. A G-code line needs the driver armed; a ``$`` command does
+        not. Neither re-arms the driver (use :meth:`home` / :meth:`unlock`).
+
+        Returns
+        -------
+        list of str
+            The push and setting lines printed before the ``ok``.
+
+        Raises
+        ------
+        GrblError, GrblAlarm, GrblNotArmed, GrblReset, DeviceTimeout, DeviceDisconnected,
+        UnexpectedReply
+        """
+        system = line.strip().startswith("$")
+        return self._command(
+            line.strip(), timeout=timeout, raise_pending_alarm=not system, needs_arming=not system
+        )
+
     # ------------------------------------------------------------------ machine control
 
     def home(self) -> GrblStatus:
@@ -764,10 +787,14 @@ class GrblRobot:
         self._link.write_line("$I")
         deadline = time.monotonic() + self.timeout
         heard = booted = identified = False
+        sent = answered = 0
+        sent += 1
         while True:
             try:
                 text = self._link.read_line(deadline, "$I")
             except DeviceTimeout:
+                if identified:  # a $I sent while the board booted was lost after all
+                    return
                 if not heard and not booted and self.boot_timeout > 0:
                     booted = True  # wait once for a board that is still booting
                     deadline = time.monotonic() + self.boot_timeout
@@ -782,9 +809,14 @@ class GrblRobot:
             if (reply.kind is ReplyKind.OK and identified) or (
                 reply.kind is ReplyKind.ERROR and reply.code == 8
             ):
-                if self._late_answers_possible:
-                    self._settle()
-                return
+                answered += 1
+                if answered >= sent:
+                    if self._late_answers_possible:
+                        self._settle()
+                    return
+                # A $I sent before the banner may have been kept: its answer comes next.
+                deadline = time.monotonic() + min(self.timeout, _SECOND_ANSWER_S)
+                continue
             if reply.kind is ReplyKind.UNKNOWN:
                 raise UnexpectedReply(f"answer to '$I' is not GRBL's: {text!r}", device=self.name)
             version = parse_version_feedback(text)
@@ -796,8 +828,9 @@ class GrblRobot:
                 self._options = options
                 continue
             self._note(reply.kind, text, reply.code, reply.version)
-            if reply.kind is ReplyKind.BANNER:  # the board reset on open: $I was lost
+            if reply.kind is ReplyKind.BANNER:  # the board reset on open: $I may be lost
                 self._link.write_line("$I")
+                sent += 1
                 deadline = time.monotonic() + self.timeout
 
     def _read_settings(self) -> None:
