@@ -922,6 +922,7 @@ class SimulatedGantry:
             self._wco = tuple(  # type: ignore[assignment]
                 axes[a] * scale if a in axes else self._wco[i] for i, a in enumerate("XYZ")
             )
+            self._wco_counter = 0  # GRBL reports a changed offset in the next report
             return _Pending(wait_planner=True)
         if machine_coords and motion_mode not in (0, 1):
             raise _GcodeError(30)
