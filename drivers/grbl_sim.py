@@ -64,6 +64,9 @@ affects. They are what the real firmware cannot be made to do:
 ``alarm_mid_move`` (``code``, ``fraction``)
     the next move (of non-zero length) stops at ``fraction`` of its length with
     ``ALARM:code`` (1 = hard limit).
+``restart``
+    on the next line (not executed) the controller restarts by itself (a brown-out or a
+    watchdog): position and homing are lost and the banner is printed at once.
 ``disconnect``
     on the next line (not executed) drop the link: the TCP client is closed, the pty is hung up
     and replaced by a new one behind the stable path returned by :meth:`start_pty` - like a USB
@@ -96,7 +99,7 @@ from .pty_link import PtyLink
 
 __all__ = ["FAULT_KINDS", "Fault", "SimulatedGantry"]
 
-FAULT_KINDS = ("no_reply", "garbled", "delay", "alarm_mid_move", "disconnect")
+FAULT_KINDS = ("no_reply", "garbled", "delay", "alarm_mid_move", "disconnect", "restart")
 
 #: What a garbled reply looks like on the wire: bit errors, a stray control byte, no "ok".
 GARBLED_REPLY = b"\xf2o\x1b\xebk#\xa7"
@@ -736,7 +739,7 @@ class SimulatedGantry:
     def _take_fault(self, kind: str) -> Fault | None:
         for fault in self._faults:
             if fault.kind == kind:
-                if kind in ("alarm_mid_move", "disconnect"):
+                if kind in ("alarm_mid_move", "disconnect", "restart"):
                     self._faults.remove(fault)
                 else:
                     fault.count -= 1
@@ -1074,6 +1077,13 @@ class SimulatedGantry:
                 self._received.append(line)
                 if self._take_fault("disconnect"):
                     self._disconnect()
+                    return
+                if self._take_fault("restart"):
+                    self._rx.clear()
+                    self._lines.clear()
+                    self._position = (0.0, 0.0, 0.0)
+                    self._power_up()
+                    self._power_on_messages()
                     return
                 if self._lockout is None:
                     self._lines.append(line)
