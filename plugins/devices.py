@@ -67,11 +67,13 @@ def make_grbl_robot(section: Any) -> GrblRobot | Simulated:
 
 def make_modbus_analyzer(section: Any) -> Analyzer | Simulated:
     """An ``Analyzer`` from an ``analyzer`` config section (with its simulator if simulated)."""
-    options = dict(
+    options: dict[str, Any] = dict(
         register_map=section.register_map,
         timeout=section.timeout_s,
         unit_id=section.unit,
         baudrate=section.baudrate,
+        parity=getattr(section, "parity", "E"),  # RTU framing; 8E1 is Modbus's default
+        stopbits=getattr(section, "stopbits", 1),
     )
     if not section.simulate:
         return Analyzer(
@@ -87,11 +89,14 @@ def make_modbus_analyzer(section: Any) -> Analyzer | Simulated:
         analysis_seconds=sim.analysis_seconds,
         speed_factor=sim.speed_factor,
         faults=sim.faults,
+        scan_cycle_s=getattr(sim, "scan_cycle_s", 0.0),
     )
     if sim.transport == "tcp":
         host, port = server.start_tcp("127.0.0.1")
         device = Analyzer("tcp", host=host, port=port, **options)
     else:
+        # A Linux pty refuses even parity (EINVAL) and carries no parity bits anyway.
+        options["parity"] = "N"
         device = Analyzer("rtu", serial_port=server.start_rtu(), **options)
     return Simulated(device, server)
 
