@@ -167,8 +167,11 @@ class Analyzer:
         self._link.close()
 
     def reconnect(self) -> None:
-        """Close and connect again: the way back after any failure."""
-        self.close()
+        """Close the link and connect again: the way back after any failure.
+
+        Renews only the link (it does not call :meth:`close`, which a subclass may extend).
+        """
+        self._link.close()
         self.connect()
 
     def __enter__(self) -> Analyzer:

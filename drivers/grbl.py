@@ -402,7 +402,7 @@ class GrblRobot:
                 self._handshake()
                 self._read_settings()
             except BaseException:
-                self.close()
+                self._link.close()
                 raise
 
     def close(self) -> None:
@@ -410,9 +410,13 @@ class GrblRobot:
         self._link.close()
 
     def reconnect(self) -> None:
-        """Close and open the link again, e.g. after a timeout, disconnect or garbled reply."""
+        """Close and open the link again, e.g. after a timeout, disconnect or garbled reply.
+
+        Renews only the link (it does not call :meth:`close`, which a subclass may extend to
+        release more, such as a simulator it owns).
+        """
         with self._io_lock:
-            self.close()
+            self._link.close()
             self.connect()
 
     def __enter__(self) -> GrblRobot:
@@ -469,7 +473,7 @@ class GrblRobot:
             }
         finally:
             if opened_here:
-                self.close()
+                self._link.close()
 
     identify = check
 
