@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import threading
+from pathlib import Path
 
 from grbl_fixtures import wait_for
 
-from labauto.config import Config
+from labauto.config import Config, load_config
 from labauto.devices import Analyzer, Camera, Robot
 from labauto.drivers.analyzer import Analyzer as ModbusAnalyzer
 from labauto.drivers.camera import FolderCamera, SimulatedCamera
-from labauto.drivers.grbl import GrblRobot
+from labauto.drivers.grbl import GrblRobot, TravelLimits
+from labauto.drivers.grbl_sim import SimulatedGantry
 from labauto.plugins import devices
 
 
@@ -50,3 +52,18 @@ def test_simulated_devices_are_the_real_drivers_and_close_stops_their_simulator(
         robot.close()
         analyzer.close()
     assert wait_for(lambda: sim_threads() <= before)  # both simulators stopped
+
+
+def test_the_real_hardware_example_fits_a_stock_grbl_build() -> None:
+    """configs/real-hardware.example.yaml: negative machine space, and the driver agrees."""
+    example = Path(__file__).resolve().parents[2] / "configs" / "real-hardware.example.yaml"
+    config = load_config(example, environ={})
+    robot = config.robot
+    limits = TravelLimits(x=robot.limits_x_mm, y=robot.limits_y_mm, z=robot.limits_z_mm)
+    assert limits.contains(robot.deposit.x, robot.deposit.y, robot.deposit.z)
+    assert all(limits.contains(*p.deck, robot.pick_z_mm) for p in config.calibration.points)
+    with SimulatedGantry(limits, speed_factor=100) as stock:  # $130=400 ..., no force origin
+        driver = GrblRobot(stock.start_pty(), limits=limits, timeout=0.5, boot_timeout=0)
+        with driver:
+            assert driver.build_options is not None and driver.build_options.codes == "V"
+            assert float(driver.controller_settings[130]) == 400.0
