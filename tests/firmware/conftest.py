@@ -39,11 +39,18 @@ def grbl_sim_exe(request: pytest.FixtureRequest) -> Path:
     for tool in ("make", "cc", "stdbuf"):
         if shutil.which(tool) is None:
             _unavailable(f"building/running grbl-sim needs {tool!r}, which is not installed")
-    scratch = Path(request.config.cache.mkdir(f"grbl-sim-{source_digest(source)}"))
+    name = f"grbl-sim-{source_digest(source)}"
+    cache = getattr(request.config, "cache", None)  # absent with -p no:cacheprovider
+    scratch = Path(cache.mkdir(name)) if cache is not None else _scratch(request, name)
     try:
         return build_grbl_sim(source, scratch)
     except RuntimeError as exc:
         pytest.fail(str(exc), pytrace=False)
+
+
+def _scratch(request: pytest.FixtureRequest, name: str) -> Path:
+    factory: pytest.TempPathFactory = request.getfixturevalue("tmp_path_factory")
+    return factory.mktemp(name)
 
 
 @pytest.fixture(scope="session")

@@ -48,12 +48,13 @@ class Log(list[tuple[str, str]]):
 
 def make_robot(path: str, log: Log | None = None, **options: object) -> GrblRobot:
     options.setdefault("limits", SPACE)
-    options.setdefault("timeout", 2.0)
-    options.setdefault("motion_timeout", 15.0)
+    # Generous: grbl-sim needs a whole core and runs slower than real time on a busy host.
+    options.setdefault("timeout", 5.0)
+    options.setdefault("motion_timeout", 30.0)
     options.setdefault("travel_feed", 6000.0)
     options.setdefault("z_feed", 3000.0)
     options.setdefault("poll_interval", 0.005)
-    options.setdefault("boot_timeout", 4.0)
+    options.setdefault("boot_timeout", 8.0)
     return GrblRobot(path, on_exchange=log, **options)  # type: ignore[arg-type]
 
 
@@ -187,7 +188,7 @@ def test_soft_limit_alarm_waits_for_the_reset_message_then_recovers(
             robot.status()  # GRBL answers no ? now; the driver says so at once
         started = time.monotonic()
         robot.unlock()  # waits for [MSG:Reset to continue], resets, $X
-        assert time.monotonic() - started < 3.0
+        assert time.monotonic() - started < 5.0  # no reply timeout on the way (5 s)
         received = [line for direction, line in log if direction == "rx"]
         sent = [line for direction, line in log if direction == "tx"]
         assert "[MSG:Reset to continue]" in received
@@ -202,25 +203,28 @@ def test_soft_limit_alarm_waits_for_the_reset_message_then_recovers(
 
 def test_feed_hold_goes_hold_1_then_hold_0_and_resumes(robot: GrblRobot) -> None:
     robot.move_to(-60.0, 0.0, wait=False)  # grbl-sim moves at ~1/5 of real time
-    assert wait_until(lambda: poll_status(robot).state == "Run", 2.0)
+    assert wait_until(lambda: poll_status(robot).state == "Run", 10.0)
     time.sleep(0.2)
     robot.feed_hold()
-    substates = []
-    deadline = time.monotonic() + 2.0
-    while time.monotonic() < deadline:
-        report = poll_status(robot)
-        if report.state == "Run" and not substates:
-            continue  # the hold has not been taken up yet
-        assert report.state == "Hold"
-        substates.append(report.substate)
-        if report.substate == 0:
-            break
-    assert substates[0] == 1 and substates[-1] == 0  # decelerating, then held
-    held = robot.status().position
-    time.sleep(0.2)
-    assert robot.status().position == held  # stays put
-    assert held is not None and -60.0 < held[0] < 0.0
-    robot.resume()
+    try:
+        substates = []
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:
+            time.sleep(0.02)  # GRBL needs its main loop, not only status reports
+            report = poll_status(robot)
+            if report.state == "Run" and not substates:
+                continue  # the hold has not been taken up yet
+            assert report.state == "Hold"
+            substates.append(report.substate)
+            if report.substate == 0:
+                break
+        assert substates[0] == 1 and substates[-1] == 0, (substates[-3:], report.raw)
+        held = robot.status().position
+        time.sleep(0.2)
+        assert robot.status().position == held  # stays put
+        assert held is not None and -60.0 < held[0] < 0.0
+    finally:
+        robot.resume()  # whatever happened, leave the machine moving on for the next test
     done = robot.wait_idle()
     assert done.position == (-60.0, 0.0, 0.0)
 
@@ -231,10 +235,10 @@ def test_feed_hold_goes_hold_1_then_hold_0_and_resumes(robot: GrblRobot) -> None
 def _estop_during_dwell(robot: GrblRobot, log: Log) -> None:
     dwells = log.count(("tx", "G4 P1.500"))
     thread, failures = in_thread(lambda: robot.pick(-10.0, -10.0, -4.0, dwell_s=1.5))
-    assert wait_until(lambda: log.count(("tx", "G4 P1.500")) > dwells, 5.0)
+    assert wait_until(lambda: log.count(("tx", "G4 P1.500")) > dwells, 20.0)
     time.sleep(0.3)
     robot.soft_reset()
-    thread.join(timeout=10)
+    thread.join(timeout=20)
     assert not thread.is_alive()
     assert len(failures) == 1 and isinstance(failures[0], GrblReset), failures
     assert "was cut short by a soft reset" in str(failures[0])
@@ -272,14 +276,18 @@ def test_estop_during_a_move_fails_the_wait_with_alarm_3_and_latches(
     robot: GrblRobot, log: Log
 ) -> None:
     robot.move_to(-60.0, -10.0, -4.0, wait=False)  # as pick() does, but observable
-    assert wait_until(lambda: (poll_status(robot).position or (0.0,))[0] < -5.0, 10.0)
+    assert wait_until(lambda: (poll_status(robot).position or (0.0,))[0] < -5.0, 20.0)
     waits = log.count(("tx", "G4 P0"))
     thread, failures = in_thread(robot.wait_idle)
-    assert wait_until(lambda: log.count(("tx", "G4 P0")) > waits, 5.0)
+    assert wait_until(lambda: log.count(("tx", "G4 P0")) > waits, 10.0)
     robot.soft_reset()
-    thread.join(timeout=10)
-    assert len(failures) == 1 and isinstance(failures[0], GrblAlarm), failures
-    assert failures[0].code == 3 and robot.last_alarm == 3
+    thread.join(timeout=20)
+    # grbl-sim prints ALARM:3 and the aborted G4 P0's ok in either order (its reset
+    # "interrupt" is a host thread): the wait fails either way, as an alarm or as a reset.
+    assert len(failures) == 1, failures
+    failure = failures[0]
+    assert (isinstance(failure, GrblAlarm) and failure.code == 3) or isinstance(failure, GrblReset)
+    assert robot.last_alarm == 3  # noted by the time the reset's banner came
     assert [line for line in log.sent_after("^X") if line != "?"] == []
     stopped = robot.status()
     assert stopped.state == "Alarm"
@@ -297,7 +305,7 @@ def test_startup_block_errors_are_reported_not_taken_for_garbage(robot: GrblRobo
     robot.execute("$N0=G1X-9")  # GRBL runs it to check it: no move, it is there already
     try:
         robot.soft_reset()  # after a reset the feed rate is gone: the block fails
-        assert wait_until(lambda: poll_status(robot) and robot.startup_errors, 2.0)
+        assert wait_until(lambda: poll_status(robot) and robot.startup_errors, 10.0)
         assert robot.startup_errors == [">G1X-9:error:22"]
     finally:
         robot.execute("$N0=")
