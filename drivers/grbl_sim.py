@@ -86,16 +86,15 @@ import os
 import re
 import select
 import signal
-import socket
 import threading
 import time
-import tty
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 
 from .grbl_protocol import CRITICAL_ALARMS, TravelLimits
-from .pty_link import PtyLink
+from .grbl_sim_gcode import G_GROUPS, GcodeError, parse_words, strip_comments
+from .grbl_sim_links import PtyEnd, TcpLink
 
 __all__ = ["FAULT_KINDS", "Fault", "SimulatedGantry"]
 
@@ -105,7 +104,6 @@ FAULT_KINDS = ("no_reply", "garbled", "delay", "alarm_mid_move", "disconnect", "
 GARBLED_REPLY = b"\xf2o\x1b\xebk#\xa7"
 
 _REALTIME = {ord("?"), ord("!"), ord("~"), 0x18}
-_WORD = re.compile(r"([A-Z])([-+]?(?:\d+\.?\d*|\.\d+))?")
 _BUSY_POLL_S = 0.002
 _IDLE_POLL_S = 0.25
 _BUILD_DATE = "20190830"
@@ -199,105 +197,6 @@ class _Pending:
     then: Callable[[], list[str] | None] | None = None  # action when ready; may add replies
     garbled: bool = False
     held: bool = False  # stopped by an alarm: answered "ok" only by the next reset
-
-
-class _PtyEnd:
-    """The simulator's end of a :class:`PtyLink`: the server tty, opened raw and non-blocking."""
-
-    def __init__(self, name: str, on_open: Callable[[], None] | None, latency_s: float) -> None:
-        self.link = PtyLink(name, on_client_open=on_open, latency_s=latency_s)
-        self.link_path, server_path = self.link.open()
-        self.fd = os.open(server_path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
-        tty.setraw(self.fd)
-
-    @property
-    def device(self) -> str:
-        return os.path.realpath(self.link_path)
-
-    def fds(self) -> list[int]:
-        return [self.fd]
-
-    def read(self, fd: int) -> bytes | None:
-        try:
-            return os.read(self.fd, 4096)
-        except (BlockingIOError, OSError):
-            return b""
-
-    def write(self, data: bytes) -> None:
-        with contextlib.suppress(BlockingIOError, OSError):
-            os.write(self.fd, data)  # a full tty buffer drops output, as a cable would
-
-    def drop(self) -> None:
-        """Hang up the host's pty; a fresh one appears behind the same link path."""
-        self.link.request_hang_up()
-
-    def close(self) -> None:
-        with contextlib.suppress(OSError):
-            os.close(self.fd)
-        self.link.close()
-
-
-class _TcpLink:
-    """A listening TCP socket serving one client at a time (a newer client replaces the old)."""
-
-    def __init__(self, port: int) -> None:
-        self.server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        self.server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        self.server.bind(("127.0.0.1", port))
-        self.server.listen(2)
-        self.server.setblocking(False)
-        self.client: socket.socket | None = None
-
-    @property
-    def port(self) -> int:
-        return self.server.getsockname()[1]
-
-    def fds(self) -> list[int]:
-        fds = [self.server.fileno()]
-        if self.client is not None:
-            fds.append(self.client.fileno())
-        return fds
-
-    def read(self, fd: int) -> bytes | None:
-        """Return received bytes, ``b""`` if none, ``None`` when the client went away."""
-        if fd == self.server.fileno():
-            with contextlib.suppress(BlockingIOError):
-                client, _ = self.server.accept()
-                client.setblocking(False)
-                client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                self.drop()
-                self.client = client
-            return b""
-        if self.client is None:
-            return b""
-        try:
-            data = self.client.recv(4096)
-        except BlockingIOError:
-            return b""
-        except OSError:
-            data = b""
-        if not data:
-            self.drop()
-            return None
-        return data
-
-    def write(self, data: bytes) -> None:
-        if self.client is None:
-            return
-        try:
-            self.client.sendall(data)
-        except OSError:
-            self.drop()
-
-    def drop(self) -> None:
-        if self.client is not None:
-            with contextlib.suppress(OSError):
-                self.client.close()
-            self.client = None
-
-    def close(self) -> None:
-        self.drop()
-        self.server.close()
 
 
 def _axis_layout(limits: TravelLimits, force_origin: bool | None) -> tuple[bool, int]:
@@ -416,8 +315,8 @@ class SimulatedGantry:
         self._thread: threading.Thread | None = None
         self._stopping = threading.Event()
         self._wake_r, self._wake_w = os.pipe()
-        self._pty: _PtyEnd | None = None
-        self._tcp: _TcpLink | None = None
+        self._pty: PtyEnd | None = None
+        self._tcp: TcpLink | None = None
 
         self._received: list[str] = []
         self._realtime_received: list[str] = []
@@ -439,7 +338,7 @@ class SimulatedGantry:
         with self._lock:
             if self._pty is None:
                 on_open = self._port_opened if self.reset_on_open else None
-                self._pty = _PtyEnd("ttyGRBL", on_open, self.latency_s)
+                self._pty = PtyEnd("ttyGRBL", on_open, self.latency_s)
                 if not self.reset_on_open:
                     self._boot_messages = []  # printed before anyone listened
             path = self._pty.link_path
@@ -450,7 +349,7 @@ class SimulatedGantry:
         """Listen on 127.0.0.1 (``port=0`` picks a free port) and return ``socket://127.0.0.1:PORT``."""
         with self._lock:
             if self._tcp is None:
-                self._tcp = _TcpLink(port)
+                self._tcp = TcpLink(port)
                 self._boot_messages = []  # printed before anyone listened
             url = f"socket://127.0.0.1:{self._tcp.port}"
         self._start_thread()
@@ -763,7 +662,7 @@ class SimulatedGantry:
         return pending
 
     def _execute(self, raw: str) -> _Pending:
-        line = _strip_comments(raw).replace(" ", "").upper()
+        line = strip_comments(raw).replace(" ", "").upper()
         if len(raw) > 79:
             return _Pending(["error:11"])
         if not line:
@@ -774,7 +673,7 @@ class SimulatedGantry:
             return _Pending(["error:9"])
         try:
             return self._gcode(line)
-        except _GcodeError as exc:
+        except GcodeError as exc:
             return _Pending([f"error:{exc.code}"])
 
     def _system_command(self, line: str) -> _Pending:
@@ -870,7 +769,7 @@ class SimulatedGantry:
         return _Pending(replies=[], wait_planner=True, then=finish)
 
     def _gcode(self, line: str) -> _Pending:
-        words = _parse_words(line)
+        words = parse_words(line)
         g_codes = [value for letter, value in words if letter == "G"]
         m_codes = [value for letter, value in words if letter == "M"]
         values: dict[str, float] = {}
@@ -878,32 +777,32 @@ class SimulatedGantry:
             if letter in "GMN":
                 continue
             if letter not in "XYZFPSTL":
-                raise _GcodeError(20)
+                raise GcodeError(20)
             if letter in values:
-                raise _GcodeError(25)
+                raise GcodeError(25)
             values[letter] = value
 
         motion_mode, machine_coords, dwell = self._motion_mode, False, None
         inches, relative, set_offset = self._inches, self._relative, False
         groups_seen: set[str] = set()
         for code in g_codes:
-            group = _G_GROUPS.get(code)
+            group = G_GROUPS.get(code)
             if group is None:
-                raise _GcodeError(20)
+                raise GcodeError(20)
             if group in groups_seen and group != "nonmodal":
-                raise _GcodeError(21)
+                raise GcodeError(21)
             groups_seen.add(group)
             if code in (0, 1, 80):
                 motion_mode = int(code)
             elif code == 4:
                 dwell = values.get("P")
                 if dwell is None:
-                    raise _GcodeError(28)
+                    raise GcodeError(28)
                 if dwell < 0:
-                    raise _GcodeError(4)
+                    raise GcodeError(4)
             elif code == 10:
                 if values.get("L") != 2 or values.get("P") not in (0, 1):
-                    raise _GcodeError(20)  # only G10 L2 P0/P1 (the G54 offset) is simulated
+                    raise GcodeError(20)  # only G10 L2 P0/P1 (the G54 offset) is simulated
                 set_offset = True
             elif code in (20, 21):
                 inches = code == 20
@@ -913,29 +812,29 @@ class SimulatedGantry:
                 machine_coords = True
         for code in m_codes:
             if code not in (3, 4, 5, 7, 8, 9):
-                raise _GcodeError(20)
+                raise GcodeError(20)
         if "L" in values and not set_offset:
-            raise _GcodeError(36)
+            raise GcodeError(36)
 
         axes = {a: values[a] for a in "XYZ" if a in values}
         scale = 25.4 if inches else 1.0
         if set_offset:
             if not axes:
-                raise _GcodeError(26)
+                raise GcodeError(26)
             self._wco = tuple(  # type: ignore[assignment]
                 axes[a] * scale if a in axes else self._wco[i] for i, a in enumerate("XYZ")
             )
             self._wco_counter = 0  # GRBL reports a changed offset in the next report
             return _Pending(wait_planner=True)
         if machine_coords and motion_mode not in (0, 1):
-            raise _GcodeError(30)
+            raise GcodeError(30)
         if axes and (motion_mode == 80 or dwell is not None):
-            raise _GcodeError(31)
+            raise GcodeError(31)
         feed = values["F"] * scale if "F" in values else self._feed
         if "F" in values and values["F"] <= 0:
-            raise _GcodeError(4)
+            raise GcodeError(4)
         if axes and motion_mode == 1 and feed <= 0:
-            raise _GcodeError(22)
+            raise GcodeError(22)
 
         target = None
         if axes:
@@ -1023,7 +922,7 @@ class SimulatedGantry:
             with contextlib.suppress(OSError):
                 os.write(self._wake_w, b"x")
 
-    def _links(self) -> list[_PtyEnd | _TcpLink]:
+    def _links(self) -> list[PtyEnd | TcpLink]:
         return [link for link in (self._pty, self._tcp) if link is not None]
 
     def _emit(self, lines: Iterable[str], raw: bytes | None = None) -> None:
@@ -1173,38 +1072,6 @@ class SimulatedGantry:
             pending.extra_delay = 0.0
             return False
         return True
-
-
-class _GcodeError(Exception):
-    def __init__(self, code: int) -> None:
-        super().__init__(f"error:{code}")
-        self.code = code
-
-
-_G_GROUPS: dict[float, str] = {
-    0: "motion", 1: "motion", 80: "motion", 4: "nonmodal", 10: "nonmodal", 53: "nonmodal",
-    17: "plane", 20: "units", 21: "units", 90: "distance", 91: "distance",
-    94: "feedmode", 54: "wcs",
-}  # fmt: skip
-
-
-def _strip_comments(line: str) -> str:
-    line = line.split(";", 1)[0]
-    return re.sub(r"\([^)]*\)", "", line).strip()
-
-
-def _parse_words(line: str) -> list[tuple[str, float]]:
-    words: list[tuple[str, float]] = []
-    position = 0
-    while position < len(line):
-        match = _WORD.match(line, position)
-        if not match:
-            raise _GcodeError(1)
-        if match.group(2) is None:
-            raise _GcodeError(2)
-        words.append((match.group(1), float(match.group(2))))
-        position = match.end()
-    return words
 
 
 def _interrupt(signum: int, frame: object) -> None:
