@@ -25,7 +25,7 @@ from labauto.drivers.grbl import TravelLimits
 from labauto.drivers.grbl_sim import SimulatedGantry
 from labauto.drivers.line_link import _close_quickly
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = pytest.mark.timeout(240)  # only a starved grbl-sim takes long
 
 SPACE = TravelLimits(x=(-200.0, 0.0), y=(-200.0, 0.0), z=(-50.0, 0.0))
 
@@ -148,7 +148,7 @@ def transcript(peer: Peer) -> list[tuple[str, list[str]]]:
 
 def wait_idle(peer: Peer) -> None:
     """Poll until the machine reports Idle (grbl-sim may take a while)."""
-    deadline = time.monotonic() + 40
+    deadline = time.monotonic() + 90
     while (states := peer.states(0.05)) != ["Idle"]:
         assert time.monotonic() < deadline, f"never Idle: {states}"
         time.sleep(0.1)
