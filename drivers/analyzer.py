@@ -15,8 +15,18 @@ Behaviour and choices:
   dropped connection -> ``DeviceDisconnected``; a state code the map does not know ->
   ``UnexpectedReply``; the analyzer's error state -> ``AnalyzerError`` with its error code;
   a sample id that does not fit the map -> ``DeviceRefused`` before anything is sent.
+* Every command is confirmed before the next step, because many instruments act on a command
+  only at their next PLC scan (10-100 ms later) and a ``done`` still showing from the last
+  sample would otherwise pass for the new one: the command register must read 0 again
+  (``command.clears`` in the map), ``load`` must show the new id in the ``sample_echo`` register
+  (if the map has one), and ``start`` must be seen taken - the state goes busy or error, the
+  ``result_counter`` moves, or the state changes to done from something else. Not seen within
+  ``timing.command_timeout_s``: :class:`DeviceTimeout` naming the command and what was seen.
+  ``wait_done()`` then accepts ``done`` only with the sample's id in the echo register.
 * ``wait_done()`` polls the state every ``poll_interval`` seconds: done returns, error raises,
   idle and busy keep waiting (an analyzer may show idle for a moment after start).
+* RTU line: ``baudrate`` and ``parity``/``stopbits`` (default 8E1, Modbus's standard framing;
+  ``parity="N"`` needs ``stopbits=2`` by the standard, but 8N1 is accepted as devices use it).
 """
 
 from __future__ import annotations
@@ -54,9 +64,13 @@ class Analyzer:
     serial_port : str
         RTU: the serial device path or pyserial URL (e.g. ``/dev/ttyUSB0``).
     baudrate : int
-        RTU line speed (8N1).
+        RTU line speed.
+    parity : {"E", "O", "N"}
+        RTU parity (default ``"E"``: 8E1, the Modbus standard's default).
+    stopbits : {1, 2}
+        RTU stop bits.
     unit_id : int, optional
-        Modbus unit / device id; default: ``device.unit_id`` of the map.
+        Modbus unit / device id, 1..247; default: ``device.unit_id`` of the map.
     register_map : AnalyzerMap or path, optional
         The register map; default: ``drivers/analyzer_map.yaml``.
     timeout : float
@@ -77,6 +91,8 @@ class Analyzer:
         port: int = 502,
         serial_port: str | None = None,
         baudrate: int = 19200,
+        parity: Literal["E", "O", "N"] = "E",
+        stopbits: Literal[1, 2] = 1,
         unit_id: int | None = None,
         register_map: AnalyzerMap | str | Path | None = None,
         timeout: float = 1.0,
@@ -87,8 +103,17 @@ class Analyzer:
         self.map = register_map if isinstance(register_map, AnalyzerMap) else load_map(register_map)
         self.name = name
         self.unit_id = self.map.unit_id if unit_id is None else unit_id
-        if not 0 <= self.unit_id <= 255:
-            raise ValueError(f"unit_id must be 0..255, got {self.unit_id!r}")
+        if isinstance(self.unit_id, bool) or not (
+            isinstance(self.unit_id, int) and 1 <= self.unit_id <= 247
+        ):
+            raise ValueError(
+                f"{name}: unit_id must be 1..247 (0 is broadcast, 248-255 are reserved), "
+                f"got {self.unit_id!r}"
+            )
+        if parity not in ("E", "O", "N"):
+            raise ValueError(f"{name}: parity must be 'E', 'O' or 'N', got {parity!r}")
+        if stopbits not in (1, 2):
+            raise ValueError(f"{name}: stopbits must be 1 or 2, got {stopbits!r}")
         self.poll_interval = self.map.poll_interval_s if poll_interval is None else poll_interval
         if self.poll_interval <= 0:
             raise ValueError(f"poll_interval must be > 0 seconds, got {self.poll_interval!r}")
@@ -98,10 +123,13 @@ class Analyzer:
             port=port,
             serial_port=serial_port,
             baudrate=baudrate,
+            parity=parity,
+            stopbits=stopbits,
             timeout=timeout,
             device=name,
             on_exchange=on_exchange,
         )
+        self._expected_echo: str | int | None = None
         self._result_spans = read_spans(self.map.results)
         self._identification_spans = read_spans(self.map.identification)
 
@@ -139,8 +167,11 @@ class Analyzer:
         self._link.close()
 
     def reconnect(self) -> None:
-        """Close and connect again: the way back after any failure."""
-        self.close()
+        """Close the link and connect again: the way back after any failure.
+
+        Renews only the link (it does not call :meth:`close`, which a subclass may extend).
+        """
+        self._link.close()
         self.connect()
 
     def __enter__(self) -> Analyzer:
@@ -196,10 +227,48 @@ class Analyzer:
             field.address, registers, self.unit_id, label=f"sample id {sample_id!r}"
         )
         self.command("load")
+        echo = self.map.sample_echo
+        if echo is not None:
+            wanted = decode_value(field, registers)
+            self._confirm(
+                f"load of sample {sample_id!r}",
+                lambda: (
+                    None
+                    if (shown := self._read_field(echo, "sample echo")) == wanted
+                    else f"the sample echo reads {shown!r}"
+                ),
+            )
 
     def start(self) -> None:
-        """Send the ``start`` command."""
+        """Send the ``start`` command and confirm the analyzer took it.
+
+        Taken means: the state went busy or error, the result counter moved, or the state
+        changed to done from another state.
+
+        Raises
+        ------
+        DeviceTimeout
+            Not seen taken within the map's ``command_timeout_s``.
+        """
+        counter = self.map.result_counter
+        before_state = self.state()
+        before_count = self._read_field(counter, "result counter") if counter else None
+
+        def started() -> str | None:
+            state = self.state()
+            if state in ("busy", "error"):
+                return None
+            count = self._read_field(counter, "result counter") if counter else None
+            if count is not None and count != before_count:
+                return None
+            if state == "done" and before_state != "done":
+                return None
+            return f"the state stays {state}" + (
+                f" and the result counter {count}" if count is not None else ""
+            )
+
         self.command("start")
+        self._confirm("start", started)
 
     def abort(self) -> None:
         """Send the ``abort`` command."""
@@ -210,14 +279,26 @@ class Analyzer:
         self.command("reset")
 
     def command(self, name: str) -> None:
-        """Write the code of command ``name`` (any command the map defines)."""
+        """Write the code of command ``name`` (any command the map defines).
+
+        With ``command.clears`` in the map, waits until the command register reads 0 again
+        (the analyzer took it), at most ``timing.command_timeout_s``.
+        """
         try:
             code = self.map.command.code(name)
         except KeyError as exc:
             raise DeviceRefused(str(exc.args[0]), device=self.name) from None
-        self._link.write_registers(
-            self.map.command.field.address, [code], self.unit_id, label=f"command {name}"
-        )
+        register = self.map.command.field
+        self._link.write_registers(register.address, [code], self.unit_id, label=f"command {name}")
+        if self.map.command_clears and code != 0:
+            self._confirm(
+                f"command {name}",
+                lambda: (
+                    None
+                    if (shown := self._read_field(register, "command")) == 0
+                    else f"the command register still reads {shown}"
+                ),
+            )
 
     def wait_done(self, timeout: float = 60.0) -> None:
         """Poll the state until the analysis is done.
@@ -238,7 +319,9 @@ class Analyzer:
         while True:
             state = self.state()
             if state == "done":
-                return
+                if self._expected_echo is None or self._echo_matches():
+                    return
+                state = "done (of another sample: the echo does not match)"
             if state == "error":
                 code = self.error_code()
                 raise AnalyzerError(
@@ -257,10 +340,17 @@ class Analyzer:
         return {f.name: values[f.name] for f in self.map.results}
 
     def analyze(self, sample_id: str | int, timeout: float = 60.0) -> dict[str, Value]:
-        """Load ``sample_id``, start, wait until done (at most ``timeout`` s), read the result."""
+        """Load ``sample_id``, start, wait until done (at most ``timeout`` s), read the result.
+
+        Each step is confirmed (see the module docstring), so the result is the sample's own.
+        """
         self.load_sample(sample_id)
         self.start()
-        self.wait_done(timeout)
+        self._expected_echo = sample_id
+        try:
+            self.wait_done(timeout)
+        finally:
+            self._expected_echo = None
         return self.read_result()
 
     def identify(self) -> dict[str, Any]:
@@ -282,6 +372,27 @@ class Analyzer:
         return info
 
     # -- internals ------------------------------------------------------------------------------
+    def _confirm(self, what: str, check: Callable[[], str | None]) -> None:
+        """Poll ``check()`` (None = confirmed, else what was seen) up to the command timeout."""
+        limit = self.map.command_timeout_s
+        deadline = time.monotonic() + limit
+        while (seen := check()) is not None:
+            if time.monotonic() >= deadline:
+                raise DeviceTimeout(
+                    f"the analyzer did not take the {what} within {limit:g} s: {seen}",
+                    device=self.name,
+                )
+            time.sleep(min(self.poll_interval, 0.02))
+
+    def _echo_matches(self) -> bool:
+        echo = self.map.sample_echo
+        if echo is None:
+            return True
+        wanted = decode_value(
+            self.map.sample_id, encode_value(self.map.sample_id, self._expected_echo)
+        )
+        return self._read_field(echo, "sample echo") == wanted
+
     def _read_field(self, field: RegisterField, label: str) -> Value:
         registers = self._link.read_registers(
             field.table,

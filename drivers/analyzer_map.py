@@ -19,6 +19,13 @@ comments document the format; the choices made here are:
 * State codes map a state name (``idle``, ``busy``, ``done``, ``error``, all required) to one code
   or a list of codes, so an instrument with several busy codes can be mapped. Command codes need
   ``load``, ``start``, ``abort``, ``reset``; ``none`` and extra commands are allowed.
+* How the driver confirms that the analyzer took a command (many instruments act on a command
+  only at their next PLC scan, 10-100 ms later): ``command.clears`` (default true) says the
+  command register reads 0 once taken; the optional ``confirmation`` section names a
+  ``sample_echo`` register (the sample id the analyzer works on, same type as ``sample_id``) and
+  a ``result_counter`` (incremented per finished analysis); ``timing.command_timeout_s``
+  (default 2) bounds the wait.
+* ``device.unit_id`` is a Modbus unit address, 1..247 (0 is broadcast, 248-255 reserved).
 
 Validation rejects unknown keys, missing keys, wrong types, bad codes and overlapping registers
 with a :class:`MapError` naming the file and the key path (e.g. ``results[2].type``).
@@ -132,9 +139,18 @@ class AnalyzerMap:
     error_code: RegisterField
     results: tuple[RegisterField, ...]
     identification: tuple[RegisterField, ...] = field(default=())
+    #: The register where the analyzer shows the sample id it works on (optional).
+    sample_echo: RegisterField | None = None
+    #: A number the analyzer increments with each finished analysis (optional).
+    result_counter: RegisterField | None = None
+    #: Whether the command register reads 0 again once the analyzer took the command.
+    command_clears: bool = True
+    #: Seconds the analyzer may take to show it took a command (a PLC scans every 10-100 ms).
+    command_timeout_s: float = 2.0
 
     def fields(self) -> tuple[RegisterField, ...]:
         """Every register field of the map."""
+        confirmation = tuple(f for f in (self.sample_echo, self.result_counter) if f is not None)
         return (
             self.command.field,
             self.sample_id,
@@ -142,6 +158,7 @@ class AnalyzerMap:
             self.error_code,
             *self.results,
             *self.identification,
+            *confirmation,
         )
 
 
@@ -192,21 +209,38 @@ def parse_map(data: Any, source: str = "<map>") -> AnalyzerMap:
     """
     top = _Section(data, "", source)
     device = top.section("device")
-    unit_id = device.integer("unit_id", 0, 255)
+    unit_id = device.integer("unit_id", 1, 247)
     model = device.text("model", default="")
     device.finish()
 
     word_order = top.choice("word_order", WORD_ORDERS)
     timing = top.section("timing")
     poll_interval_s = timing.number("poll_interval_s", positive=True)
+    command_timeout_s = timing.number("command_timeout_s", default=2.0, positive=True)
     timing.finish()
 
-    command = _coded_register(top.section("command"), "holding", REQUIRED_COMMANDS, "command")
+    command_node = top.section("command")
+    command_clears = command_node.get("clears", True)
+    if not isinstance(command_clears, bool):
+        command_node.fail("clears", f"must be true or false, got {_kind(command_clears)}")
+    command = _coded_register(command_node, "holding", REQUIRED_COMMANDS, "command")
     sample_id = _field(top.section("sample_id"), "sample_id", word_order, fixed_table="holding")
     state = _coded_register(top.section("state"), None, STATE_NAMES, "state")
     error_code = _field(top.section("error_code"), "error_code", word_order, numbers_only=True)
     results = _field_list(top, "results", word_order, required=True)
     identification = _field_list(top, "identification", word_order, required=False)
+    sample_echo = result_counter = None
+    if "confirmation" in top.data:
+        confirm = top.section("confirmation")
+        if "sample_echo" in confirm.data:
+            sample_echo = _field(confirm.section("sample_echo"), "sample_echo", word_order)
+            if sample_echo.type != sample_id.type:
+                confirm.fail("sample_echo", f"must have the sample id's type {sample_id.type}")
+        if "result_counter" in confirm.data:
+            result_counter = _field(
+                confirm.section("result_counter"), "result_counter", word_order, numbers_only=True
+            )
+        confirm.finish()
     top.finish()
 
     named = [
@@ -216,6 +250,7 @@ def parse_map(data: Any, source: str = "<map>") -> AnalyzerMap:
         ("error_code", error_code),
         *((f"results[{i}]", f) for i, f in enumerate(results)),
         *((f"identification[{i}]", f) for i, f in enumerate(identification)),
+        *((f"confirmation.{f.name}", f) for f in (sample_echo, result_counter) if f is not None),
     ]
     _check_overlaps(named, source)
     _check_unique_names(results, "results", source)
@@ -232,6 +267,10 @@ def parse_map(data: Any, source: str = "<map>") -> AnalyzerMap:
         error_code=error_code,
         results=tuple(results),
         identification=tuple(identification),
+        sample_echo=sample_echo,
+        result_counter=result_counter,
+        command_clears=command_clears,
+        command_timeout_s=command_timeout_s,
     )
 
 

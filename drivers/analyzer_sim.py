@@ -19,6 +19,13 @@ command               effect
 ``none``              nothing. Unknown codes are refused with ILLEGAL_DATA_VALUE.
 ====================  ==================================================================
 
+With ``scan_cycle_s`` the analyzer acts like a PLC front-end: a command written to the command
+register is taken only at the next scan (every ``scan_cycle_s`` wall-clock seconds); until then
+the register reads back the code written, and a second command written before the scan replaces
+the first (the first is never seen). A command the state forbids is then dropped silently
+instead of being refused with an exception. The ``sample_echo`` register (if the map has one)
+shows the sample id loaded or last analysed; ``result_counter`` counts finished analyses.
+
 Results are a deterministic function of the sample id (SHA-256 of the id picks each value in
 a plausible range), so a test knows what the driver must read: :meth:`expected_result`.
 
@@ -117,6 +124,8 @@ class SimulatedAnalyzer:
         serial number 4242, firmware version 102).
     clock : callable
         Monotonic time source in seconds.
+    scan_cycle_s : float
+        0: commands act at once. Otherwise they act at the next scan (see the module docstring).
     """
 
     def __init__(
@@ -128,11 +137,18 @@ class SimulatedAnalyzer:
         faults: Mapping[str, Any] | Iterable[str] | None = None,
         identity: Mapping[str, Value] | None = None,
         clock: Callable[[], float] = time.monotonic,
+        scan_cycle_s: float = 0.0,
     ) -> None:
         if analysis_seconds < 0:
             raise ValueError(f"analysis_seconds must be >= 0, got {analysis_seconds!r}")
         if speed_factor <= 0:
             raise ValueError(f"speed_factor must be > 0, got {speed_factor!r}")
+        if not scan_cycle_s >= 0:
+            raise ValueError(f"scan_cycle_s must be >= 0, got {scan_cycle_s!r}")
+        self.scan_cycle_s = float(scan_cycle_s)
+        self._pending_command: tuple[int, float] | None = None  # (code, scan time)
+        self._echo = ""
+        self._finished = 0
         self.map = register_map if isinstance(register_map, AnalyzerMap) else load_map(register_map)
         self.analysis_seconds = analysis_seconds
         self.speed_factor = speed_factor
@@ -265,6 +281,10 @@ class SimulatedAnalyzer:
             for offset, value in enumerate(values):
                 a = address + offset
                 if a == command.address:
+                    if self.scan_cycle_s:
+                        scan = (int(self._clock() / self.scan_cycle_s) + 1) * self.scan_cycle_s
+                        self._pending_command = (value, scan)
+                        continue
                     refusal = self._command(value)
                     if refusal:
                         return refusal
@@ -283,7 +303,15 @@ class SimulatedAnalyzer:
 
     # -- state machine ----------------------------------------------------------------------------
     def _advance(self) -> None:
-        """Finish a running analysis whose time is up (lazy: called before every access)."""
+        """Finish a running analysis whose time is up, take a command at its scan (lazy)."""
+        self._finish_analysis()
+        if self._pending_command is not None and self._clock() >= self._pending_command[1]:
+            code, _ = self._pending_command
+            self._pending_command = None
+            self._command(code)  # a refusal cannot be answered any more: the command is dropped
+            self._finish_analysis()
+
+    def _finish_analysis(self) -> None:
         if self._phase != "busy" or "busy" in self._faults:
             return
         if self._clock() < self._busy_until:
@@ -295,6 +323,7 @@ class SimulatedAnalyzer:
         else:
             self._phase = "done"
             self._result_of = self._loaded
+            self._finished = (self._finished + 1) % 65536
         self._loaded = None
 
     def _shown_state(self) -> str:
@@ -308,6 +337,7 @@ class SimulatedAnalyzer:
                 self._phase, self._loaded, self._result_of = "idle", None, None
                 if name == "reset":
                     self._error_code = 0
+                    self._echo = ""
             return None
         if name not in ("load", "start"):
             return ILLEGAL_DATA_VALUE  # unknown command code
@@ -320,6 +350,7 @@ class SimulatedAnalyzer:
             if sample_id in ("", 0):
                 return ILLEGAL_DATA_VALUE
             self._phase, self._loaded, self._result_of = "idle", str(sample_id), None
+            self._echo = str(sample_id)
             return None
         if self._loaded is None:
             return ILLEGAL_DATA_VALUE
@@ -338,8 +369,9 @@ class SimulatedAnalyzer:
         if table == "holding":
             image.update(self._holding)
         m = self.map
+        pending = self._pending_command[0] if self._pending_command is not None else 0
         shown: dict[str, Value] = {
-            m.command.field.name: 0,
+            m.command.field.name: pending,
             m.state.field.name: m.state.code(self._shown_state()),
             m.error_code.name: self._error_code if self._phase == "error" else 0,
         }
@@ -348,7 +380,16 @@ class SimulatedAnalyzer:
             shown[f.name] = result.get(f.name, "" if f.type == "string" else 0)
         for f in m.identification:
             shown[f.name] = self._identity.get(f.name, "" if f.type == "string" else 0)
-        for f in (m.command.field, m.state.field, m.error_code, *m.results, *m.identification):
+        confirmation = [f for f in (m.sample_echo, m.result_counter) if f is not None]
+        if m.sample_echo is not None:
+            echo: Value = self._echo
+            if m.sample_echo.type != "string":
+                echo = int(self._echo) if self._echo else 0
+            shown[m.sample_echo.name] = echo
+        if m.result_counter is not None:
+            shown[m.result_counter.name] = self._finished
+        fields = (m.command.field, m.state.field, m.error_code, *m.results, *m.identification)
+        for f in (*fields, *confirmation):
             if f.table == table:
                 registers = _encode_fitting(f, shown[f.name])
                 image.update(zip(range(f.address, f.end), registers, strict=True))

@@ -28,6 +28,7 @@ __all__ = [
     "MAX_LINE_LENGTH",
     "SOFT_RESET",
     "STATUS_QUERY",
+    "BuildOptions",
     "GrblStatus",
     "Reply",
     "ReplyKind",
@@ -36,9 +37,13 @@ __all__ = [
     "classify_reply",
     "error_meaning",
     "format_axis_words",
+    "machine_space",
     "parse_banner",
+    "parse_build_options",
     "parse_status",
     "parse_version_feedback",
+    "startup_block",
+    "travel_problems",
 ]
 
 # Real-time commands: single bytes GRBL acts on immediately, outside the line protocol.
@@ -92,18 +97,24 @@ ERROR_MEANINGS: dict[int, str] = {
 }
 
 ALARM_MEANINGS: dict[int, str] = {
-    1: "Hard limit triggered. Machine position is likely lost due to sudden and immediate halt. "
+    1: "Hard limit has been triggered. Machine position is likely lost due to sudden halt. "
     "Re-homing is highly recommended.",
-    2: "G-code motion target exceeds machine travel. Machine position safely retained. "
-    "Alarm may be unlocked.",
-    3: "Reset while in motion. Grbl cannot guarantee position. Lost steps are likely. "
+    2: "Soft limit alarm. G-code motion target exceeds machine travel. Machine position "
+    "retained. Alarm may be safely unlocked.",
+    3: "Reset while in motion. Machine position is likely lost due to sudden halt. "
     "Re-homing is highly recommended.",
-    4: "Probe fail. The probe is not in the expected initial state before starting probe cycle.",
-    5: "Probe fail. Probe did not contact the workpiece within the programmed travel.",
-    6: "Homing fail. Reset during active homing cycle.",
-    7: "Homing fail. Safety door was opened during active homing cycle.",
-    8: "Homing fail. Cycle failed to clear limit switch when pulling off.",
-    9: "Homing fail. Could not find limit switch within search distance.",
+    4: "Probe fail. Probe is not in the expected initial state before starting probe cycle "
+    "when G38.2 and G38.3 is not triggered and G38.4 and G38.5 is triggered.",
+    5: "Probe fail. Probe did not contact the workpiece within the programmed travel for "
+    "G38.2 and G38.4.",
+    6: "Homing fail. The active homing cycle was reset.",
+    7: "Homing fail. Safety door was opened during homing cycle.",
+    8: "Homing fail. Pull off travel failed to clear limit switch. Try increasing pull-off "
+    "setting or check wiring.",
+    9: "Homing fail. Could not find limit switch within search distances. Try increasing max "
+    "travel, decreasing pull-off distance, or check wiring.",
+    10: "Homing fail. Second dual axis limit switch failed to trigger within configured search "
+    "distance after first. Try increasing trigger fail distance or check wiring.",
 }
 
 #: Alarms after which GRBL 1.1 ignores everything but a soft reset ("[MSG:Reset to continue]").
@@ -132,12 +143,15 @@ def alarm_meaning(code: int) -> str:
 class TravelLimits:
     """Allowed machine-coordinate range per axis, in millimetres, bounds included.
 
-    The defaults describe a 300 x 200 mm bed with 50 mm of Z travel below the homed top (Z=0),
-    the usual GRBL layout with homing at the top-left-back corner and ``HOMING_FORCE_SET_ORIGIN``.
+    The defaults describe a 300 x 200 mm bed with 50 mm of Z travel in the machine space of a
+    stock GRBL 1.1 build: every axis homes to its maximum (``$23=0``) and, without the build
+    option ``HOMING_FORCE_SET_ORIGIN``, the home corner is the machine origin, so the whole
+    travel is negative (``[-$130, 0]`` on X and so on). A build with that option and X/Y homing
+    to their minimum (``$23=3``) has X in ``[0, $130]`` instead; see :func:`machine_space`.
     """
 
-    x: tuple[float, float] = (0.0, 300.0)
-    y: tuple[float, float] = (0.0, 200.0)
+    x: tuple[float, float] = (-300.0, 0.0)
+    y: tuple[float, float] = (-200.0, 0.0)
     z: tuple[float, float] = (-50.0, 0.0)
 
     def __post_init__(self) -> None:
@@ -199,7 +213,8 @@ class ReplyKind(Enum):
     ALARM = "alarm"
     STATUS = "status"
     BANNER = "banner"
-    PUSH = "push"  # [MSG:...], [VER:...], [GC:...], >startup-line:ok, ...
+    PUSH = "push"  # [MSG:...], [VER:...], [GC:...], ...
+    STARTUP = "startup"  # >G21 G90:ok or >G1X5:error:22, the result of a $N start-up block
     SETTING = "setting"  # $N=value
     EMPTY = "empty"
     UNKNOWN = "unknown"
@@ -216,7 +231,8 @@ class Reply:
     text
         The line without its terminator and surrounding blanks.
     code
-        N of ``error:N`` / ``ALARM:N``; ``None`` otherwise.
+        N of ``error:N`` / ``ALARM:N`` and of a start-up block's ``>line:error:N``; ``None``
+        otherwise.
     version
         Firmware version from a banner (``"1.1h"``); ``None`` otherwise.
     """
@@ -227,6 +243,7 @@ class Reply:
     version: str | None = None
 
 
+_STARTUP = re.compile(r"^>(.*):(?:ok|error:(\d+))$")
 _BANNER = re.compile(r"^Grbl(?:HAL)?\s+(\S+)\s+\[.*\]\s*$", re.IGNORECASE)
 _CODED = re.compile(r"^(error|ALARM):(\d+)$")
 _SETTING = re.compile(r"^\$\d+=\S*$")
@@ -281,9 +298,11 @@ def classify_reply(line: str) -> Reply:
         return Reply(kind, text, code=int(coded.group(2)))
     if text.startswith("<") and text.endswith(">"):
         return Reply(ReplyKind.STATUS, text)
-    if (text.startswith("[") and text.endswith("]")) or (
-        text.startswith(">") and text.endswith(":ok")
-    ):
+    startup = _STARTUP.match(text)
+    if startup:
+        code = startup.group(2)
+        return Reply(ReplyKind.STARTUP, text, code=int(code) if code is not None else None)
+    if text.startswith("[") and text.endswith("]"):
         return Reply(ReplyKind.PUSH, text)
     if _SETTING.match(text):
         return Reply(ReplyKind.SETTING, text)
@@ -456,3 +475,109 @@ def parse_status(line: str) -> GrblStatus:
                 extra.append((name, body))
     values["extra"] = tuple(extra)
     return GrblStatus(**values)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------------------------
+# Build options and machine space
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    """The ``[OPT:...]`` line of ``$I``: compile-time options of the firmware.
+
+    Attributes
+    ----------
+    codes
+        The option letters (``"VZ"``...; see GRBL's ``build_option_codes_en_US.csv``).
+    planner_blocks, rx_buffer
+        Planner buffer blocks and serial receive buffer bytes (``None`` if not sent).
+    """
+
+    codes: str = ""
+    planner_blocks: int | None = None
+    rx_buffer: int | None = None
+
+    @property
+    def homing_force_origin(self) -> bool:
+        """Built with ``HOMING_FORCE_SET_ORIGIN`` (code ``Z``): homing sets the origin there."""
+        return "Z" in self.codes
+
+
+def parse_build_options(line: str) -> BuildOptions | None:
+    """Parse ``[OPT:VZ,15,128]``; ``None`` if the line is not an ``[OPT:`` line."""
+    text = line.strip()
+    if not (text.startswith("[OPT:") and text.endswith("]")):
+        return None
+    codes, *numbers = text[5:-1].split(",")
+    counts = [int(n) if n.isdigit() else None for n in numbers[:2]] + [None, None]
+    return BuildOptions(codes, counts[0], counts[1])
+
+
+def startup_block(line: str) -> tuple[str, int | None] | None:
+    """Split a start-up block result ``>G1X5:error:22`` into ``("G1X5", 22)``.
+
+    ``>G21:ok`` gives ``("G21", None)``; a line that is not such a result gives ``None``.
+    """
+    match = _STARTUP.match(line.strip())
+    if not match:
+        return None
+    return match.group(1), int(match.group(2)) if match.group(2) is not None else None
+
+
+Range = tuple[float, float]
+
+
+def machine_space(settings: dict[int, str], options: BuildOptions) -> dict[str, Range] | None:
+    """The machine-coordinate range each axis can reach, as the firmware's soft limits see it.
+
+    GRBL 1.1 (``limits.c``, ``system_check_travel_limits``): without ``HOMING_FORCE_SET_ORIGIN``
+    an axis spans ``[-$13N, 0]`` whatever ``$23`` says (homing to the maximum, the default, puts
+    the switch at 0). With the option, an axis whose ``$23`` bit is set (homing to the minimum)
+    spans ``[0, $13N]`` and the others ``[-$13N, 0]``.
+
+    Returns
+    -------
+    dict or None
+        ``{"x": (low, high), "y": ..., "z": ...}``; ``None`` when ``$130``-``$132`` are missing
+        or not numbers.
+    """
+    try:
+        travel = [abs(float(settings[130 + i])) for i in range(3)]
+        direction_mask = int(float(settings.get(23, "0")))
+    except (KeyError, ValueError):
+        return None
+    space: dict[str, Range] = {}
+    for i, axis in enumerate("xyz"):
+        to_minimum = options.homing_force_origin and direction_mask & (1 << i)
+        space[axis] = (0.0, travel[i]) if to_minimum else (-travel[i], 0.0)
+    return space
+
+
+def travel_problems(
+    limits: TravelLimits, settings: dict[int, str], options: BuildOptions
+) -> list[str]:
+    """Say, axis by axis, where configured ``limits`` leave the firmware's machine space.
+
+    Returns an empty list when everything fits (or the settings are incomplete), else one
+    sentence per axis naming the configured range, the firmware's range and why it is so.
+    """
+    space = machine_space(settings, options)
+    if space is None:
+        return []
+    layout = (
+        "built with HOMING_FORCE_SET_ORIGIN"
+        if options.homing_force_origin
+        else "no HOMING_FORCE_SET_ORIGIN: the home corner is 0 and the travel is negative"
+    )
+    problems = []
+    for i, axis in enumerate("xyz"):
+        low, high = getattr(limits, axis)
+        space_low, space_high = space[axis]
+        if low < space_low - 1e-6 or high > space_high + 1e-6:
+            problems.append(
+                f"{axis} limits [{low:g}, {high:g}] mm leave the controller's travel "
+                f"[{space_low:g}, {space_high:g}] mm (${130 + i}={settings[130 + i]}, "
+                f"$23={settings.get(23, '0')}, {layout})"
+            )
+    return problems

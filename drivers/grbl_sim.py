@@ -2,30 +2,50 @@
 
 The simulator speaks the same line protocol as a GRBL 1.1 controller, so the real driver
 (:class:`labauto.drivers.grbl.GrblRobot`) talks to it through pyserial exactly as it would talk
-to hardware. It runs in one background thread.
+to hardware. It runs in one background thread; its pseudo-terminal is a
+:class:`labauto.drivers.pty_link.PtyLink`. Where the firmware's behaviour is known it is copied
+from GRBL 1.1h, and ``tests/firmware`` compares the two byte for byte (status reports, alarms,
+resets, holds, homing); what is left different is said below.
 
 What it simulates (and the choices made where a real machine would differ)
 ---------------------------------------------------------------------------
 * **Start-up**: like GRBL with homing enabled (``$22=1``) it starts in ``Alarm`` and prints
-  ``Grbl 1.1h ['$' for help]`` and ``[MSG:'$H'|'$X' to unlock]``; ``homing_lock=False`` starts
-  ``Idle`` instead. ``$H`` moves to the machine origin (0, 0, 0) at ``homing_feed``
-  (``HOMING_FORCE_SET_ORIGIN`` layout) and the ``ok`` comes when homing is done.
-* **Motion**: ``G0``/``G1`` with ``X Y Z F``, ``G20/G21``, ``G90/G91``, ``G53`` (work offsets are
-  always zero, so it changes nothing), ``G54``, ``G17``, ``G94``, ``G80``, ``G4 P<seconds>``,
-  ``M3/M4/M5 S``, ``M7/M8/M9``. Moves are queued (``ok`` at once) and executed one after
-  another at constant speed, no acceleration: a move takes ``distance / feed`` (``G0`` uses
-  ``rapid_feed``). Every simulated duration - moves, dwells, homing - is divided by
-  ``speed_factor``. ``?`` during a move reports ``Run`` with the interpolated ``MPos``.
-  ``G4``, ``M3-M9`` and ``$H`` wait for the planner to empty before their ``ok`` (as GRBL's
-  buffer synchronisation does). Arcs, jogging (``$J=``), probing and overrides are not simulated
+  ``\\r\\nGrbl 1.1h ['$' for help]`` and ``[MSG:'$H'|'$X' to unlock]``; ``homing_lock=False``
+  starts ``Idle`` instead. With ``reset_on_open`` the pty behaves like an Arduino on USB: every
+  open of the port restarts the controller (position lost, settings kept) and the banner comes
+  ``boot_delay`` seconds later; bytes sent while it boots are lost. ``startup_blocks`` are run
+  after each start-up outside ``Alarm`` and answered ``>line:ok`` / ``>line:error:N``.
+* **Machine space**: as GRBL's soft limits see it. Without ``HOMING_FORCE_SET_ORIGIN`` (the
+  stock build, the default for limits such as ``x=(-300, 0)``) each axis spans
+  ``[-$13N, 0]``, homing ends ``homing_pulloff`` below the switch (``MPos -1``) and
+  ``[OPT:V,15,128]`` has no ``Z``. Limits that start at 0 (``x=(0, 300)``) model a build with
+  the option and X/Y homing to their minimum (``$23=3``): homing ends at 0 and
+  ``[OPT:VZ,15,128]``. ``$$`` reports ``$23`` and ``$130``-``$132`` to match.
+* **Motion**: ``G0``/``G1`` with ``X Y Z F``, ``G20/G21``, ``G90/G91``, ``G53``, ``G54`` with
+  ``G10 L2 P1`` offsets, ``G17``, ``G94``, ``G80``, ``G4 P<seconds>``, ``M3/M4/M5 S``,
+  ``M7/M8/M9``. Moves are queued (``ok`` at once) and executed one after another at constant
+  speed, no acceleration: a move takes ``distance / feed`` (``G0`` uses ``rapid_feed``). Every
+  simulated duration - moves, dwells, homing - is divided by ``speed_factor``. ``?`` during a
+  move reports ``Run`` with the interpolated ``MPos`` and the programmed feed (GRBL reports the
+  momentary one). ``G4``, ``G10``, ``M3-M9`` and ``$H`` wait for the planner to empty before
+  their ``ok``. Arcs, jogging (``$J=``), probing and overrides are not simulated
   (``error:20`` / ``error:3``).
+* **Status reports** follow GRBL's field order and refresh counters: ``WCO`` in the first report
+  after a start-up and then every 10th (30th while busy), ``Ov`` (with ``A:`` when an output is
+  on) every 10th (20th while busy) and right after an output changed; ``$10=0`` reports
+  ``WPos`` instead of ``MPos``. The real firmware built for the host (grbl-sim) also sends
+  ``Pn:`` because it has no input pins; this simulator does not.
 * **Real-time bytes** ``?``, ``!``, ``~`` and Ctrl-X act immediately, also while a line waits.
-  ``!`` stops at once (no deceleration), so holds are always ``Hold:0``. Ctrl-X during motion
-  or homing raises ``ALARM:3`` / ``ALARM:6``, clears the planner, turns outputs off and prints
-  the banner; a controller in ``Alarm`` then wants ``$X`` or ``$H``.
-* **Soft limits**: a target outside ``limits`` raises ``ALARM:2``. As in GRBL 1.1, ALARM:1 and
-  ALARM:2 are *critical*: the controller prints ``[MSG:Reset to continue]`` and ignores
-  everything - lines and ``?`` alike - until Ctrl-X.
+  ``!`` stops the position at once but reports ``Hold:1`` (decelerating) for ``hold_decel``
+  simulated seconds, then ``Hold:0``. During homing ``?`` is not answered at once; the report
+  comes when homing ends (GRBL checks only for a reset then).
+* **Reset** (Ctrl-X): clears the planner and the line buffer, turns outputs off; during motion or
+  homing it raises ``ALARM:3`` / ``ALARM:6`` first. A line still awaiting its answer (a dwell,
+  ``G4 P0``, the line a soft limit stopped) is answered ``ok`` before the banner, as GRBL does.
+* **Alarms**: after printing ``ALARM:N`` GRBL sleeps 500 ms (``alarm_delay``), hearing nothing:
+  ``?`` and Ctrl-X sent then are lost. A target outside ``limits`` raises ``ALARM:2``. ALARM:1 and
+  ALARM:2 are *critical*: after the delay the controller prints ``[MSG:Reset to continue]`` and
+  ignores everything - lines and ``?`` alike - until Ctrl-X.
 * **Line endings**: like GRBL, ``\\r`` and ``\\n`` each end a line, so ``\\r\\n`` gives two
   replies. Replies end in ``\\r\\n``.
 
@@ -33,7 +53,7 @@ Faults
 ------
 Armed from the constructor (``faults=[{"fault": "delay", "seconds": 0.3}]`` or :class:`Fault`
 objects) or at run time with :meth:`SimulatedGantry.inject`; each is used up by the lines it
-affects:
+affects. They are what the real firmware cannot be made to do:
 
 ``no_reply`` (``count``)
     swallow the next ``count`` lines: not executed, never answered.
@@ -44,10 +64,13 @@ affects:
 ``alarm_mid_move`` (``code``, ``fraction``)
     the next move (of non-zero length) stops at ``fraction`` of its length with
     ``ALARM:code`` (1 = hard limit).
+``restart``
+    on the next line (not executed) the controller restarts by itself (a brown-out or a
+    watchdog): position and homing are lost and the banner is printed at once.
 ``disconnect``
-    on the next line (not executed) drop the link: the TCP client is closed, the pty is closed
-    and replaced by a new one, and the stable path returned by :meth:`start_pty` is pointed at
-    it - like a USB adapter re-enumerating under the same ``/dev/serial/by-id`` link.
+    on the next line (not executed) drop the link: the TCP client is closed, the pty is hung up
+    and replaced by a new one behind the stable path returned by :meth:`start_pty` - like a USB
+    adapter re-enumerating under the same ``/dev/serial/by-id`` link.
 
 Only one host should be connected at a time: output goes to every open link.
 Run ``python -m labauto.drivers.grbl_sim`` to serve a simulator on a pty for manual use.
@@ -63,29 +86,31 @@ import os
 import re
 import select
 import signal
-import socket
-import tempfile
 import threading
 import time
-import tty
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 
 from .grbl_protocol import CRITICAL_ALARMS, TravelLimits
+from .grbl_sim_gcode import G_GROUPS, GcodeError, parse_words, strip_comments
+from .grbl_sim_links import PtyEnd, TcpLink
 
 __all__ = ["FAULT_KINDS", "Fault", "SimulatedGantry"]
 
-FAULT_KINDS = ("no_reply", "garbled", "delay", "alarm_mid_move", "disconnect")
+FAULT_KINDS = ("no_reply", "garbled", "delay", "alarm_mid_move", "disconnect", "restart")
 
 #: What a garbled reply looks like on the wire: bit errors, a stray control byte, no "ok".
 GARBLED_REPLY = b"\xf2o\x1b\xebk#\xa7"
 
 _REALTIME = {ord("?"), ord("!"), ord("~"), 0x18}
-_WORD = re.compile(r"([A-Z])([-+]?(?:\d+\.?\d*|\.\d+))?")
 _BUSY_POLL_S = 0.002
 _IDLE_POLL_S = 0.25
 _BUILD_DATE = "20190830"
+_BUSY_STATES = ("Run", "Home", "Hold", "Jog", "Door")
+#: GRBL's status refresh counts (config.h): WCO idle/busy, overrides idle/busy.
+_WCO_REFRESH = (10, 30)
+_OVR_REFRESH = (10, 20)
 
 
 @dataclass
@@ -171,124 +196,30 @@ class _Pending:
     not_before: float = 0.0
     then: Callable[[], list[str] | None] | None = None  # action when ready; may add replies
     garbled: bool = False
+    held: bool = False  # stopped by an alarm: answered "ok" only by the next reset
 
 
-class _PtyLink:
-    """A pseudo-terminal whose slave side is reached through a stable symlink."""
-
-    def __init__(self, link_path: str) -> None:
-        self.link_path = link_path
-        self.master = -1
-        self.slave = -1
-        self.open()
-
-    def open(self) -> None:
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)  # no echo, no line editing, no CR/LF translation
-        os.set_blocking(self.master, False)
-        temporary = self.link_path + ".new"
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(temporary)
-        os.symlink(os.ttyname(self.slave), temporary)
-        os.replace(temporary, self.link_path)
-
-    @property
-    def device(self) -> str:
-        return os.ttyname(self.slave)
-
-    def fds(self) -> list[int]:
-        return [self.master]
-
-    def read(self, fd: int) -> bytes | None:
-        try:
-            return os.read(self.master, 4096)
-        except BlockingIOError:
-            return b""
-        except OSError:
-            return b""  # EIO: no slave open; our own slave fd normally prevents this
-
-    def write(self, data: bytes) -> None:
-        with contextlib.suppress(BlockingIOError, OSError):
-            os.write(self.master, data)  # a full tty buffer drops output, as a cable would
-
-    def drop(self) -> None:
-        """Close this pty (the host sees EIO) and open a fresh one behind the same link."""
-        self.close_fds()
-        self.open()
-
-    def close_fds(self) -> None:
-        for fd in (self.master, self.slave):
-            with contextlib.suppress(OSError):
-                os.close(fd)
-        self.master = self.slave = -1
-
-    def close(self) -> None:
-        self.close_fds()
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(self.link_path)
-
-
-class _TcpLink:
-    """A listening TCP socket serving one client at a time (a newer client replaces the old)."""
-
-    def __init__(self, port: int) -> None:
-        self.server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        self.server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        self.server.bind(("127.0.0.1", port))
-        self.server.listen(2)
-        self.server.setblocking(False)
-        self.client: socket.socket | None = None
-
-    @property
-    def port(self) -> int:
-        return self.server.getsockname()[1]
-
-    def fds(self) -> list[int]:
-        fds = [self.server.fileno()]
-        if self.client is not None:
-            fds.append(self.client.fileno())
-        return fds
-
-    def read(self, fd: int) -> bytes | None:
-        """Return received bytes, ``b""`` if none, ``None`` when the client went away."""
-        if fd == self.server.fileno():
-            with contextlib.suppress(BlockingIOError):
-                client, _ = self.server.accept()
-                client.setblocking(False)
-                client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                self.drop()
-                self.client = client
-            return b""
-        if self.client is None:
-            return b""
-        try:
-            data = self.client.recv(4096)
-        except BlockingIOError:
-            return b""
-        except OSError:
-            data = b""
-        if not data:
-            self.drop()
-            return None
-        return data
-
-    def write(self, data: bytes) -> None:
-        if self.client is None:
-            return
-        try:
-            self.client.sendall(data)
-        except OSError:
-            self.drop()
-
-    def drop(self) -> None:
-        if self.client is not None:
-            with contextlib.suppress(OSError):
-                self.client.close()
-            self.client = None
-
-    def close(self) -> None:
-        self.drop()
-        self.server.close()
+def _axis_layout(limits: TravelLimits, force_origin: bool | None) -> tuple[bool, int]:
+    """Check ``limits`` fit a GRBL machine space; return (HOMING_FORCE_SET_ORIGIN, ``$23``)."""
+    mask = 0
+    for i, axis in enumerate("xyz"):
+        low, high = getattr(limits, axis)
+        if high == 0.0 and low < 0:
+            continue
+        if low == 0.0 and high > 0 and force_origin is not False:
+            mask |= 1 << i
+            continue
+        raise ValueError(
+            f"limits.{axis}=({low:g}, {high:g}) fits no GRBL machine space: expected (-travel, 0)"
+            + (
+                " or (0, travel) (a HOMING_FORCE_SET_ORIGIN build)"
+                if force_origin is not False
+                else ""
+            )
+        )
+    if force_origin is None:
+        force_origin = mask != 0
+    return force_origin, mask
 
 
 class SimulatedGantry:
@@ -297,7 +228,8 @@ class SimulatedGantry:
     Parameters
     ----------
     limits
-        Soft limits in machine coordinates (mm); a target outside raises ``ALARM:2``.
+        Soft limits in machine coordinates (mm); a target outside raises ``ALARM:2``. Each axis
+        is ``(-travel, 0)`` or, for a ``HOMING_FORCE_SET_ORIGIN`` build, ``(0, travel)``.
     speed_factor
         Divides every simulated duration (tests use 50-200).
     firmware
@@ -308,6 +240,22 @@ class SimulatedGantry:
         Start in ``Alarm`` (GRBL with homing enabled, the default) instead of ``Idle``.
     rapid_feed, homing_feed
         Feed rates in mm/min of ``G0`` and of the homing cycle.
+    homing_force_origin
+        Model a build with ``HOMING_FORCE_SET_ORIGIN``; ``None``: whenever an axis of ``limits``
+        starts at 0.
+    homing_pulloff
+        ``$27``: how far below the switch homing ends in a stock build (mm).
+    reset_on_open, boot_delay
+        Restart on every open of the pty (a DTR reset) and print the banner ``boot_delay``
+        wall-clock seconds later.
+    alarm_delay
+        Wall-clock seconds GRBL stays deaf after printing ``ALARM:N`` (500 ms in GRBL 1.1).
+    hold_decel
+        Simulated seconds a feed hold reports ``Hold:1`` before ``Hold:0``.
+    latency_s
+        Deliver pty output in batches this far apart (a USB adapter's latency timer).
+    startup_blocks
+        ``$N0``/``$N1`` lines run after each start-up outside ``Alarm``.
 
     Examples
     --------
@@ -325,16 +273,41 @@ class SimulatedGantry:
         homing_lock: bool = True,
         rapid_feed: float = 6000.0,
         homing_feed: float = 3000.0,
+        homing_force_origin: bool | None = None,
+        homing_pulloff: float = 1.0,
+        reset_on_open: bool = False,
+        boot_delay: float = 1.0,
+        alarm_delay: float = 0.5,
+        hold_decel: float = 0.05,
+        latency_s: float = 0.0,
+        startup_blocks: Iterable[str] = (),
     ) -> None:
         if not speed_factor > 0:
             raise ValueError(f"speed_factor must be > 0, got {speed_factor!r}")
         if not (rapid_feed > 0 and homing_feed > 0):
             raise ValueError(f"feeds must be > 0, got {rapid_feed!r}, {homing_feed!r}")
+        for label, value in (
+            ("homing_pulloff", homing_pulloff),
+            ("boot_delay", boot_delay),
+            ("alarm_delay", alarm_delay),
+            ("hold_decel", hold_decel),
+            ("latency_s", latency_s),
+        ):
+            if not value >= 0:
+                raise ValueError(f"{label} must be >= 0, got {value!r}")
         self.limits = limits or TravelLimits()
+        self.force_origin, self.homing_dir_mask = _axis_layout(self.limits, homing_force_origin)
         self.speed_factor = float(speed_factor)
         self.firmware = firmware
         self.rapid_feed = float(rapid_feed)
         self.homing_feed = float(homing_feed)
+        self.homing_pulloff = float(homing_pulloff)
+        self.reset_on_open = reset_on_open
+        self.boot_delay = float(boot_delay)
+        self.alarm_delay = float(alarm_delay)
+        self.hold_decel = float(hold_decel)
+        self.latency_s = float(latency_s)
+        self.startup_blocks = [str(b) for b in startup_blocks]
         self._homing_lock = homing_lock
         self._faults: list[Fault] = [Fault.from_config(f) for f in faults or ()]
 
@@ -342,15 +315,15 @@ class SimulatedGantry:
         self._thread: threading.Thread | None = None
         self._stopping = threading.Event()
         self._wake_r, self._wake_w = os.pipe()
-        self._pty: _PtyLink | None = None
-        self._tcp: _TcpLink | None = None
-        self._tempdir: str | None = None
+        self._pty: PtyEnd | None = None
+        self._tcp: TcpLink | None = None
 
         self._received: list[str] = []
         self._realtime_received: list[str] = []
         self._rx = bytearray()
         self._lines: deque[str] = deque()
-        self._reports = 0
+        self._status_mask = 1  # $10
+        self._wco = (0.0, 0.0, 0.0)  # G54 offset (G10 L2 P1), kept like EEPROM data
         self._position = (0.0, 0.0, 0.0)
         self._power_up()
 
@@ -360,13 +333,14 @@ class SimulatedGantry:
         """Serve on a new pseudo-terminal and return the path to give the driver.
 
         The path is a symlink in a private temporary directory that always points at the
-        current pty slave (see the ``disconnect`` fault); the real device is :attr:`pty_device`.
+        current pty (see the ``disconnect`` fault); the real device is :attr:`pty_device`.
         """
         with self._lock:
             if self._pty is None:
-                self._tempdir = tempfile.mkdtemp(prefix="labauto-grbl-")
-                self._pty = _PtyLink(os.path.join(self._tempdir, "ttyGRBL"))
-                self._power_on_messages()
+                on_open = self._port_opened if self.reset_on_open else None
+                self._pty = PtyEnd("ttyGRBL", on_open, self.latency_s)
+                if not self.reset_on_open:
+                    self._boot_messages = []  # printed before anyone listened
             path = self._pty.link_path
         self._start_thread()
         return path
@@ -375,8 +349,8 @@ class SimulatedGantry:
         """Listen on 127.0.0.1 (``port=0`` picks a free port) and return ``socket://127.0.0.1:PORT``."""
         with self._lock:
             if self._tcp is None:
-                self._tcp = _TcpLink(port)
-                self._power_on_messages()
+                self._tcp = TcpLink(port)
+                self._boot_messages = []  # printed before anyone listened
             url = f"socket://127.0.0.1:{self._tcp.port}"
         self._start_thread()
         return url
@@ -390,16 +364,12 @@ class SimulatedGantry:
             self._thread.join(timeout=5)
             self._thread = None
         with self._lock:
-            if self._pty is not None:
-                self._pty.close()
-                self._pty = None
+            pty, self._pty = self._pty, None
             if self._tcp is not None:
                 self._tcp.close()
                 self._tcp = None
-            if self._tempdir is not None:
-                with contextlib.suppress(OSError):
-                    os.rmdir(self._tempdir)
-                self._tempdir = None
+        if pty is not None:
+            pty.close()  # outside the lock: the relay thread may be in _port_opened
         for fd in (self._wake_r, self._wake_w):
             with contextlib.suppress(OSError):
                 os.close(fd)
@@ -478,6 +448,13 @@ class SimulatedGantry:
         with self._lock:
             return self._homed
 
+    @property
+    def home_position(self) -> tuple[float, float, float]:
+        """Where homing ends: 0 with ``HOMING_FORCE_SET_ORIGIN``, else ``-homing_pulloff``."""
+        if self.force_origin:
+            return (0.0, 0.0, 0.0)
+        return (-self.homing_pulloff,) * 3  # type: ignore[return-value]
+
     # ---------------------------------------------------------------- machine state
 
     def _power_up(self) -> None:
@@ -488,7 +465,24 @@ class SimulatedGantry:
         self._pending: _Pending | None = None
         self._lockout: str | None = None  # "critical" (only Ctrl-X) or "sleep"
         self._last_tick = time.monotonic()
-        self._boot_messages = self._banner()
+        self._stall_until = 0.0  # deaf after an alarm report until then
+        self._after_stall: Callable[[], None] | None = None
+        self._boot_until = 0.0
+        self._hold_settles = 0.0
+        self._status_deferred = False
+        self._wco_counter = self._ovr_counter = 0
+        self._boot_messages = self._banner() + self._run_startup_blocks()
+
+    def _port_opened(self) -> None:
+        """A host opened the pty: restart like an Arduino whose DTR line pulses."""
+        with self._lock:
+            self._rx.clear()
+            self._lines.clear()
+            self._position = (0.0, 0.0, 0.0)
+            self._power_up()
+            self._boot_until = time.monotonic() + self.boot_delay
+        with contextlib.suppress(OSError):
+            os.write(self._wake_w, b"x")
 
     def _reset_modal(self) -> None:
         self._motion_mode = 0
@@ -501,10 +495,20 @@ class SimulatedGantry:
         self._mist = False
 
     def _banner(self) -> list[str]:
-        lines = [f"Grbl {self.firmware} ['$' for help]"]
+        lines = ["", f"Grbl {self.firmware} ['$' for help]"]
         if self._state == "Alarm":
             lines.append("[MSG:'$H'|'$X' to unlock]")
         return lines
+
+    def _run_startup_blocks(self) -> list[str]:
+        if self._state == "Alarm":
+            return []
+        results = []
+        for block in self.startup_blocks:
+            pending = self._execute(block)
+            answer = pending.replies[0] if pending.replies else "ok"
+            results.append(f">{block}:{answer}")
+        return results
 
     def _current_position(self) -> tuple[float, float, float]:
         if self._planner:
@@ -516,24 +520,43 @@ class SimulatedGantry:
         return self._planner[-1].end if self._planner else self._position
 
     def _state_text(self) -> str:
-        return "Hold:0" if self._state == "Hold" else self._state
+        if self._state == "Hold":
+            return "Hold:1" if time.monotonic() < self._hold_settles else "Hold:0"
+        return self._state
 
     def _status_report(self) -> str:
         x, y, z = self._current_position()
+        busy = self._state in _BUSY_STATES
         moving = self._state in ("Run", "Home") and bool(self._planner)
         feed = self._planner[0].feed if moving else 0.0
-        report = f"<{self._state_text()}|MPos:{x:.3f},{y:.3f},{z:.3f}|FS:{feed:.0f},"
+        if self._status_mask & 1:
+            report = f"<{self._state_text()}|MPos:{x:.3f},{y:.3f},{z:.3f}"
+        else:
+            wx, wy, wz = (p - o for p, o in zip((x, y, z), self._wco, strict=True))
+            report = f"<{self._state_text()}|WPos:{wx:.3f},{wy:.3f},{wz:.3f}"
+        if self._status_mask & 2:
+            report += f"|Bf:{15 - len(self._planner)},128"
+        report += f"|FS:{feed:.0f},"
         report += f"{self._spindle_speed if self._spindle != 'off' else 0:.0f}"
-        if self._reports % 10 == 0:
-            report += "|WCO:0.000,0.000,0.000"
-        accessories = (
-            {"cw": "S", "ccw": "C"}.get(self._spindle, "")
-            + ("F" if self._flood else "")
-            + ("M" if self._mist else "")
-        )
-        if accessories:
-            report += f"|Ov:100,100,100|A:{accessories}"
-        self._reports += 1
+        if self._wco_counter > 0:
+            self._wco_counter -= 1
+        else:
+            self._wco_counter = _WCO_REFRESH[busy] - 1
+            if self._ovr_counter == 0:
+                self._ovr_counter = 1
+            report += "|WCO:" + ",".join(f"{v:.3f}" for v in self._wco)
+        if self._ovr_counter > 0:
+            self._ovr_counter -= 1
+        else:
+            self._ovr_counter = _OVR_REFRESH[busy] - 1
+            report += "|Ov:100,100,100"
+            accessories = (
+                {"cw": "S", "ccw": "C"}.get(self._spindle, "")
+                + ("F" if self._flood else "")
+                + ("M" if self._mist else "")
+            )
+            if accessories:
+                report += f"|A:{accessories}"
         return report + ">"
 
     def _advance(self, now: float) -> None:
@@ -548,7 +571,7 @@ class SimulatedGantry:
                 strike = block.alarm_at * block.duration
                 if block.elapsed + dt >= strike:
                     block.elapsed = strike
-                    self._emit(self._alarm(block.alarm_code))
+                    self._alarm(block.alarm_code, now)
                     return
             remaining = block.duration - block.elapsed
             if dt >= remaining:
@@ -561,43 +584,61 @@ class SimulatedGantry:
         if not self._planner:
             self._state = "Idle"
 
-    def _alarm(self, code: int) -> list[str]:
-        """Stop everything where it is and enter the alarm state."""
+    def _alarm(self, code: int, now: float) -> None:
+        """Stop everything where it is, print ``ALARM:code`` and stay deaf ``alarm_delay``.
+
+        A line awaiting its answer keeps waiting (the next reset answers it ``ok``). After a
+        critical alarm the controller then prints ``[MSG:Reset to continue]`` and locks.
+        """
         self._position = self._current_position()
         self._planner.clear()
-        self._pending = None
+        if self._pending is not None:
+            self._pending.held = True
         self._lines.clear()
         self._spindle, self._flood, self._mist = "off", False, False
         self._state = "Alarm"
-        messages = [f"ALARM:{code}"]
+        self._status_deferred = False
+        self._emit([f"ALARM:{code}"])
+        self._stall_until = now + self.alarm_delay
         if code in CRITICAL_ALARMS:
             self._lockout = "critical"
-            messages.append("[MSG:Reset to continue]")
-        return messages
 
-    def _soft_reset(self) -> list[str]:
-        messages: list[str] = []
-        if self._state in ("Run", "Home"):
-            messages = self._alarm(6 if self._state == "Home" else 3)
+            def report_critical() -> None:
+                self._emit(["[MSG:Reset to continue]"])
+
+            self._after_stall = report_critical
+
+    def _soft_reset(self, now: float) -> None:
+        """Ctrl-X: alarm if moving (then deaf ``alarm_delay``), answer a held line, banner."""
+        if self._state in ("Run", "Home") or (self._state == "Hold" and self._planner):
+            self._alarm(6 if self._state == "Home" else 3, now)
+            self._after_stall = self._finish_reset
+            return
+        self._finish_reset()
+
+    def _finish_reset(self) -> None:
+        messages = ["ok"] if self._pending is not None and not self._pending.garbled else []
         self._position = self._current_position()
         self._planner.clear()
         self._pending = None
         self._lines.clear()
         self._rx.clear()
         self._lockout = None
+        self._status_deferred = False
+        self._wco_counter = self._ovr_counter = 0
         if self._state == "Sleep":
             self._state = "Alarm"
         elif self._state != "Alarm":
             self._state = "Idle"
         self._reset_modal()
-        return messages + self._banner()
+        self._emit(messages + self._banner() + self._run_startup_blocks())
 
     # ---------------------------------------------------------------- faults
 
     def _take_fault(self, kind: str) -> Fault | None:
         for fault in self._faults:
             if fault.kind == kind:
-                if kind in ("alarm_mid_move", "disconnect"):
+                if kind in ("alarm_mid_move", "disconnect", "restart"):
                     self._faults.remove(fault)
                 else:
                     fault.count -= 1
@@ -621,7 +662,7 @@ class SimulatedGantry:
         return pending
 
     def _execute(self, raw: str) -> _Pending:
-        line = _strip_comments(raw).replace(" ", "").upper()
+        line = strip_comments(raw).replace(" ", "").upper()
         if len(raw) > 79:
             return _Pending(["error:11"])
         if not line:
@@ -632,7 +673,7 @@ class SimulatedGantry:
             return _Pending(["error:9"])
         try:
             return self._gcode(line)
-        except _GcodeError as exc:
+        except GcodeError as exc:
             return _Pending([f"error:{exc.code}"])
 
     def _system_command(self, line: str) -> _Pending:
@@ -651,7 +692,7 @@ class SimulatedGantry:
         if command == "C":
             if self._state == "Check":
                 self._state = "Idle"
-                return _Pending(["[MSG:Disabled]", "ok", *self._soft_reset()])
+                return _Pending(["[MSG:Disabled]", "ok", *self._reset_lines()])
             if self._state != "Idle":
                 return _Pending(["error:8"])
             self._state = "Check"
@@ -661,7 +702,10 @@ class SimulatedGantry:
         if command == "$":
             return _Pending([*self._settings(), "ok"])
         if command == "I":
-            return _Pending([f"[VER:{self.firmware}.{_BUILD_DATE}:]", "[OPT:V,15,128]", "ok"])
+            codes = "VZ" if self.force_origin else "V"
+            return _Pending(
+                [f"[VER:{self.firmware}.{_BUILD_DATE}:]", f"[OPT:{codes},15,128]", "ok"]
+            )
         if command == "H":
             return self._start_homing()
         if command == "SLP":
@@ -669,14 +713,24 @@ class SimulatedGantry:
             self._lockout = "sleep"
             self._spindle, self._flood, self._mist = "off", False, False
             return _Pending(["ok", "[MSG:Sleeping]"])
-        if re.fullmatch(r"\d+=[-+]?\d*\.?\d*", command):
+        setting = re.fullmatch(r"(\d+)=([-+]?\d*\.?\d*)", command)
+        if setting:
+            if setting.group(1) == "10":
+                self._status_mask = int(float(setting.group(2) or 0))
             return _Pending()
         return _Pending(["error:3"])
+
+    def _reset_lines(self) -> list[str]:
+        """Leaving check mode resets GRBL: the banner follows the ``ok``."""
+        self._planner.clear()
+        self._reset_modal()
+        return self._banner()
 
     def _settings(self) -> list[str]:
         (x0, x1), (y0, y1), (z0, z1) = self.limits.x, self.limits.y, self.limits.z
         return [
-            "$10=1", "$20=1", "$21=1", "$22=1",
+            f"$10={self._status_mask}", "$20=1", "$21=0", "$22=1",
+            f"$23={self.homing_dir_mask}", f"$27={self.homing_pulloff:.3f}",
             f"$110={self.rapid_feed:.3f}", f"$111={self.rapid_feed:.3f}",
             f"$112={self.rapid_feed:.3f}",
             f"$130={x1 - x0:.3f}", f"$131={y1 - y0:.3f}", f"$132={z1 - z0:.3f}",
@@ -693,49 +747,63 @@ class SimulatedGantry:
 
     def _start_homing(self) -> _Pending:
         start = self._current_position()
-        home = (0.0, 0.0, 0.0)
+        home = self.home_position
         distance = math.dist(start, home)
         duration = distance / self.homing_feed * 60.0 / self.speed_factor
         self._planner.append(_Move(start, home, self.homing_feed, duration, homing=True))
         self._state = "Home"
+        self._last_tick = time.monotonic()
 
-        def finish() -> None:
+        def finish() -> list[str]:
+            # GRBL answers the ? that came during homing still in Home, then runs the
+            # start-up blocks, then says ok.
+            self._state = "Home"
+            replies = []
+            if self._status_deferred:
+                self._status_deferred = False
+                replies.append(self._status_report())
             self._homed = True
+            self._state = "Idle"
+            return [*replies, *self._run_startup_blocks(), "ok"]
 
-        return _Pending(wait_planner=True, then=finish)
+        return _Pending(replies=[], wait_planner=True, then=finish)
 
     def _gcode(self, line: str) -> _Pending:
-        words = _parse_words(line)
+        words = parse_words(line)
         g_codes = [value for letter, value in words if letter == "G"]
         m_codes = [value for letter, value in words if letter == "M"]
         values: dict[str, float] = {}
         for letter, value in words:
             if letter in "GMN":
                 continue
-            if letter not in "XYZFPST":
-                raise _GcodeError(20)
+            if letter not in "XYZFPSTL":
+                raise GcodeError(20)
             if letter in values:
-                raise _GcodeError(25)
+                raise GcodeError(25)
             values[letter] = value
 
         motion_mode, machine_coords, dwell = self._motion_mode, False, None
-        inches, relative = self._inches, self._relative
+        inches, relative, set_offset = self._inches, self._relative, False
         groups_seen: set[str] = set()
         for code in g_codes:
-            group = _G_GROUPS.get(code)
+            group = G_GROUPS.get(code)
             if group is None:
-                raise _GcodeError(20)
+                raise GcodeError(20)
             if group in groups_seen and group != "nonmodal":
-                raise _GcodeError(21)
+                raise GcodeError(21)
             groups_seen.add(group)
             if code in (0, 1, 80):
                 motion_mode = int(code)
             elif code == 4:
                 dwell = values.get("P")
                 if dwell is None:
-                    raise _GcodeError(28)
+                    raise GcodeError(28)
                 if dwell < 0:
-                    raise _GcodeError(4)
+                    raise GcodeError(4)
+            elif code == 10:
+                if values.get("L") != 2 or values.get("P") not in (0, 1):
+                    raise GcodeError(20)  # only G10 L2 P0/P1 (the G54 offset) is simulated
+                set_offset = True
             elif code in (20, 21):
                 inches = code == 20
             elif code in (90, 91):
@@ -744,26 +812,39 @@ class SimulatedGantry:
                 machine_coords = True
         for code in m_codes:
             if code not in (3, 4, 5, 7, 8, 9):
-                raise _GcodeError(20)
+                raise GcodeError(20)
+        if "L" in values and not set_offset:
+            raise GcodeError(36)
 
         axes = {a: values[a] for a in "XYZ" if a in values}
-        if machine_coords and motion_mode not in (0, 1):
-            raise _GcodeError(30)
-        if axes and (motion_mode == 80 or dwell is not None):
-            raise _GcodeError(31)
         scale = 25.4 if inches else 1.0
+        if set_offset:
+            if not axes:
+                raise GcodeError(26)
+            self._wco = tuple(  # type: ignore[assignment]
+                axes[a] * scale if a in axes else self._wco[i] for i, a in enumerate("XYZ")
+            )
+            self._wco_counter = 0  # GRBL reports a changed offset in the next report
+            return _Pending(wait_planner=True)
+        if machine_coords and motion_mode not in (0, 1):
+            raise GcodeError(30)
+        if axes and (motion_mode == 80 or dwell is not None):
+            raise GcodeError(31)
         feed = values["F"] * scale if "F" in values else self._feed
         if "F" in values and values["F"] <= 0:
-            raise _GcodeError(4)
+            raise GcodeError(4)
         if axes and motion_mode == 1 and feed <= 0:
-            raise _GcodeError(22)
+            raise GcodeError(22)
 
         target = None
         if axes:
             origin = self._planned_end()
-            offset_from_origin = relative and not machine_coords
             target = tuple(
-                (origin[i] if offset_from_origin else 0.0) + axes[a] * scale
+                (
+                    origin[i] + axes[a] * scale
+                    if relative and not machine_coords
+                    else axes[a] * scale + (0.0 if machine_coords else self._wco[i])
+                )
                 if a in axes
                 else origin[i]
                 for i, a in enumerate("XYZ")
@@ -776,9 +857,9 @@ class SimulatedGantry:
         if "S" in values:
             self._spindle_speed = values["S"]
         if target is not None and not self.limits.contains(*target):
-            # Soft limit: GRBL finishes nothing of the block and raises a critical alarm.
-            self._lines.clear()
-            return _Pending(replies=self._alarm(2))
+            # Soft limit: nothing of the block runs, a critical alarm; "ok" comes at the reset.
+            self._alarm(2, time.monotonic())
+            return _Pending(held=True)
         outputs = self._output_changes(m_codes)
         if self._state == "Check":
             return _Pending()
@@ -802,6 +883,7 @@ class SimulatedGantry:
             return None
 
         def apply() -> None:
+            self._ovr_counter = 0  # GRBL reports an output change in the next status report
             for code in m_codes:
                 if code in (3, 4):
                     self._spindle = "cw" if code == 3 else "ccw"
@@ -840,7 +922,7 @@ class SimulatedGantry:
             with contextlib.suppress(OSError):
                 os.write(self._wake_w, b"x")
 
-    def _links(self) -> list[_PtyLink | _TcpLink]:
+    def _links(self) -> list[PtyEnd | TcpLink]:
         return [link for link in (self._pty, self._tcp) if link is not None]
 
     def _emit(self, lines: Iterable[str], raw: bytes | None = None) -> None:
@@ -850,7 +932,7 @@ class SimulatedGantry:
                 link.write(data)
 
     def _power_on_messages(self) -> None:
-        """Print the start-up banner once, on the first link (nobody may be listening yet)."""
+        """Print the start-up banner once the board has booted (``reset_on_open``)."""
         if self._boot_messages:
             self._emit(self._boot_messages)
             self._boot_messages = []
@@ -866,7 +948,8 @@ class SimulatedGantry:
             with self._lock:
                 for fd in readable:
                     if fd == self._wake_r:
-                        os.read(self._wake_r, 64)
+                        with contextlib.suppress(OSError):
+                            os.read(self._wake_r, 64)
                         continue
                     link = owners[fd]
                     if link not in self._links():
@@ -880,6 +963,8 @@ class SimulatedGantry:
 
     def _receive(self, data: bytes) -> None:
         now = time.monotonic()
+        if now < self._boot_until:
+            return  # the board is still booting: the bootloader eats what it is sent
         for byte in data:
             if byte in _REALTIME:
                 self._realtime(byte, now)
@@ -891,6 +976,13 @@ class SimulatedGantry:
                 self._received.append(line)
                 if self._take_fault("disconnect"):
                     self._disconnect()
+                    return
+                if self._take_fault("restart"):
+                    self._rx.clear()
+                    self._lines.clear()
+                    self._position = (0.0, 0.0, 0.0)
+                    self._power_up()
+                    self._power_on_messages()
                     return
                 if self._lockout is None:
                     self._lines.append(line)
@@ -908,21 +1000,43 @@ class SimulatedGantry:
     def _realtime(self, byte: int, now: float) -> None:
         self._advance(now)
         self._realtime_received.append("^X" if byte == 0x18 else chr(byte))
+        if now < self._stall_until:
+            return  # deaf while the alarm report delay runs: the byte is lost
         if byte == 0x18:
-            self._emit(self._soft_reset())
+            self._soft_reset(now)
         elif self._lockout == "critical":
             return
         elif byte == ord("?"):
-            self._emit([self._status_report()])
+            if self._state == "Home":
+                self._status_deferred = True
+            else:
+                self._emit([self._status_report()])
         elif byte == ord("!"):
-            if self._state in ("Run", "Idle"):
+            if self._state == "Run":
                 self._position = self._current_position()
                 self._state = "Hold"
+                self._hold_settles = now + self.hold_decel / self.speed_factor
+            elif self._state == "Idle":
+                self._state = "Hold"
+                self._hold_settles = now
         elif byte == ord("~") and self._state == "Hold":
             self._state = "Run" if self._planner else "Idle"
+            self._last_tick = now
 
     def _service(self, now: float) -> bool:
         """Advance time, finish waiting answers, execute queued lines; return True if busy."""
+        if self._boot_until:
+            if now < self._boot_until:
+                return True
+            self._boot_until = 0.0
+            self._power_on_messages()
+        if self._stall_until:
+            if now < self._stall_until:
+                return True
+            self._stall_until = 0.0
+            then, self._after_stall = self._after_stall, None
+            if then is not None:
+                then()
         self._advance(now)
         while True:
             if self._pending is not None:
@@ -935,14 +1049,16 @@ class SimulatedGantry:
                     self._emit([], raw=GARBLED_REPLY + b"\r\n")
                 else:
                     self._emit(replies)
-            if not self._lines or self._lockout is not None:
-                return bool(self._planner)
+            if not self._lines or self._lockout is not None or self._stall_until:
+                return bool(self._planner) or bool(self._stall_until)
             self._pending = self._accept_line(self._lines.popleft())
             self._advance(now)
 
     def _pending_ready(self, now: float) -> bool:
         pending = self._pending
         assert pending is not None
+        if pending.held:
+            return False
         if pending.wait_planner:
             if self._planner or self._state in ("Hold", "Alarm"):
                 return False
@@ -956,38 +1072,6 @@ class SimulatedGantry:
             pending.extra_delay = 0.0
             return False
         return True
-
-
-class _GcodeError(Exception):
-    def __init__(self, code: int) -> None:
-        super().__init__(f"error:{code}")
-        self.code = code
-
-
-_G_GROUPS: dict[float, str] = {
-    0: "motion", 1: "motion", 80: "motion", 4: "nonmodal", 53: "nonmodal",
-    17: "plane", 20: "units", 21: "units", 90: "distance", 91: "distance",
-    94: "feedmode", 54: "wcs",
-}  # fmt: skip
-
-
-def _strip_comments(line: str) -> str:
-    line = line.split(";", 1)[0]
-    return re.sub(r"\([^)]*\)", "", line).strip()
-
-
-def _parse_words(line: str) -> list[tuple[str, float]]:
-    words: list[tuple[str, float]] = []
-    position = 0
-    while position < len(line):
-        match = _WORD.match(line, position)
-        if not match:
-            raise _GcodeError(1)
-        if match.group(2) is None:
-            raise _GcodeError(2)
-        words.append((match.group(1), float(match.group(2))))
-        position = match.end()
-    return words
 
 
 def _interrupt(signum: int, frame: object) -> None:

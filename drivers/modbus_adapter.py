@@ -12,9 +12,10 @@ gets labauto's own errors (:mod:`labauto.drivers.errors`) instead of pymodbus ex
   :class:`~labauto.drivers.errors.DeviceDisconnected`;
 * a reply of the wrong shape -> :class:`~labauto.drivers.errors.UnexpectedReply`.
 
-Version support: the client detects the unit keyword by signature, so it works with pymodbus
-3.9 through 3.16. The server needs ``SimDevice`` with an ``action`` callback (pymodbus 3.16 is
-what the tests run); :class:`ModbusServerThread` says so clearly if the installed version lacks it.
+Version support: pyproject pins pymodbus to ``>=3.13,<3.17``, the range the tests pass on
+(run on 3.13.0 and 3.16.1; the simulator's ``SimDevice`` server crashes on 3.12.1). The client
+detects the unit keyword by signature; :class:`ModbusServerThread` says clearly if the installed
+version lacks ``SimDevice`` actions.
 Requests are sent once (``retries=0``) so ``timeout`` is the real time to wait for an answer.
 """
 
@@ -231,10 +232,15 @@ class ModbusClientLink:
             except ModbusException as exc:
                 self._log("rx", f"protocol error: {exc}")
                 raise UnexpectedReply(f"{request}: {exc}", device=self.device) from exc
-            except OSError as exc:
+            except OSError as exc:  # pymodbus < 3.16 lets the port's own error through
                 self._client.close()
                 self._log("rx", f"I/O error: {exc}")
-                raise DeviceDisconnected(f"{request}: {exc}", device=self.device) from exc
+                what = (
+                    "serial port {} hung up" if self.transport == "rtu" else "connection to {} lost"
+                )
+                raise DeviceDisconnected(
+                    f"{request}: {what.format(self.endpoint)} ({exc})", device=self.device
+                ) from exc
             if response is None:
                 raise UnexpectedReply(f"{request}: empty reply", device=self.device)
             if response.isError():

@@ -5,10 +5,14 @@ and every byte written on one side comes out of the other, as on a real RS-232/R
 ends are ordinary tty devices, so pyserial and pymodbus open them like ``/dev/ttyUSB0``.
 
 The client end is published as a stable symbolic link (like ``/dev/serial/by-id/...`` made by
-udev). :meth:`PtyLink.hang_up_client` simulates a pulled cable or a USB adapter that was
-unplugged and plugged back: the client's current pty is hung up (its reads and writes fail) and a
-fresh pty appears behind the same link path, so a driver that closes and re-opens the path
-reconnects.
+udev). Two options make the line behave like a USB-serial adapter in front of a microcontroller
+board: ``on_client_open`` is called each time a client opens the port (an Arduino resets on
+the DTR edge of that open), and ``latency_s`` holds bytes going to the client and delivers them
+in batches (an FTDI chip's latency timer).
+
+:meth:`PtyLink.hang_up_client` simulates a pulled cable or a USB adapter that was unplugged
+and plugged back: the client's current pty is hung up (its reads and writes fail) and a fresh
+pty appears behind the same link path, so a driver that closes and re-opens the path reconnects.
 
 Linux/POSIX only (uses :func:`os.openpty`).
 """
@@ -23,6 +27,7 @@ import tempfile
 import threading
 import time
 import tty
+from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
 
@@ -31,22 +36,28 @@ _WRITE_PATIENCE_S = 1.0  # bytes nobody reads for this long are dropped, as on a
 
 
 class _Pty:
-    """One pseudo-terminal: the master fd the relay uses, and a held slave fd.
+    """One pseudo-terminal: the master fd the relay uses, and (normally) a held slave fd.
 
     The relay keeps its own slave fd open so that reading the master never fails with EIO while
-    no client has the slave open (Linux reports EIO on a master with no open slave).
+    no client has the slave open (Linux reports EIO on a master with no open slave). A watched
+    pty (``hold_slave=False``) lets it go instead, so that the master shows ``POLLHUP`` exactly
+    while no client has the port open.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, *, hold_slave: bool = True) -> None:
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)  # no echo, no line editing, 8-bit clean until the user configures it
         os.set_blocking(self.master, False)
         self.path = os.ttyname(self.slave)
+        if not hold_slave:
+            os.close(self.slave)
+            self.slave = -1
 
     def close(self) -> None:
         for fd in (self.master, self.slave):
-            with contextlib.suppress(OSError):
-                os.close(fd)
+            if fd >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
 
 
 class PtyLink:
@@ -56,6 +67,13 @@ class PtyLink:
     ----------
     name : str
         File name of the client-side link inside a private temporary folder (``client_path``).
+    on_client_open : callable, optional
+        Called (in the relay thread, without arguments) each time a client opens
+        ``client_path`` after nobody had it open, e.g. to restart a device as a DTR reset
+        would. Bytes sent towards the client while nobody has it open are dropped.
+    latency_s : float
+        Hold bytes going to the client until this long after the first of them arrived, then
+        deliver them at once (0: at once).
 
     Examples
     --------
@@ -63,7 +81,20 @@ class PtyLink:
     ...     server_port, client_port = link.server_path, link.client_path
     """
 
-    def __init__(self, name: str = "analyzer") -> None:
+    def __init__(
+        self,
+        name: str = "analyzer",
+        *,
+        on_client_open: Callable[[], None] | None = None,
+        latency_s: float = 0.0,
+    ) -> None:
+        if not latency_s >= 0:
+            raise ValueError(f"latency_s must be >= 0, got {latency_s!r}")
+        self.on_client_open = on_client_open
+        self.latency_s = float(latency_s)
+        self._batch = bytearray()
+        self._batch_due = 0.0
+        self._client_present = False
         self._folder = Path(tempfile.mkdtemp(prefix="labauto-pty-"))
         self.client_path = str(self._folder / name)
         self._client: _Pty | None = None
@@ -92,7 +123,7 @@ class PtyLink:
         if self._thread is not None:
             raise RuntimeError("PtyLink is already open")
         self._server = _Pty()
-        self._client = _Pty()
+        self._client = self._new_client()
         self._publish(self._client.path)
         self._wake_r, self._wake_w = os.pipe()
         self._stopping = False
@@ -164,36 +195,88 @@ class PtyLink:
         os.symlink(target, tmp)
         os.replace(tmp, self.client_path)
 
+    def _new_client(self) -> _Pty:
+        self._client_present = False
+        return _Pty(hold_slave=self.on_client_open is None)
+
     def _swap_client(self) -> None:
         assert self._client is not None
         old = self._client
-        self._client = _Pty()
+        self._client = self._new_client()
         self._publish(self._client.path)
         old.close()  # the old slave sees a hang-up once its master is closed
 
     def _relay(self) -> None:
         assert self._client is not None and self._server is not None
+        watched = self.on_client_open is not None
         while not self._stopping:
             if self._hang_up_requested.is_set():
                 self._hang_up_requested.clear()
                 self._swap_client()
                 self._hung_up.set()
             client, server = self._client.master, self._server.master
-            readable, _, _ = select.select([client, server, self._wake_r], [], [], 0.5)
+            if watched:
+                self._watch_client(client)
+            sources = [server, self._wake_r] + (
+                [client] if not watched or self._client_present else []
+            )
+            timeout = 0.5
+            if watched and not self._client_present:
+                timeout = 0.01
+            if self._batch:
+                timeout = max(0.0, min(timeout, self._batch_due - time.monotonic()))
+            readable, _, _ = select.select(sources, [], [], timeout)
             if self._wake_r in readable:
                 with contextlib.suppress(BlockingIOError):
                     os.read(self._wake_r, 64)
             if client in readable:
                 self._forward(client, server)
             if server in readable:
-                self._forward(server, client)
+                if watched and not self._client_present:
+                    with contextlib.suppress(BlockingIOError, OSError):
+                        os.read(server, _CHUNK)  # nobody listens: lost, as on a real line
+                else:
+                    self._to_client(server, client)
+            if self._batch and time.monotonic() >= self._batch_due:
+                self._deliver(bytes(self._batch), client)
+                self._batch.clear()
 
-    @staticmethod
-    def _forward(source: int, target: int) -> None:
+    def _watch_client(self, client: int) -> None:
+        """Track whether a client has the port open; call ``on_client_open`` when one opens it."""
+        poller = select.poll()
+        poller.register(client, select.POLLIN)
+        hung_up = any(event & select.POLLHUP for _, event in poller.poll(0))
+        if hung_up:
+            self._client_present = False
+            return
+        if not self._client_present:
+            self._client_present = True
+            self._batch.clear()
+            assert self.on_client_open is not None
+            self.on_client_open()
+
+    def _to_client(self, server: int, client: int) -> None:
+        if not self.latency_s:
+            self._forward(server, client)
+            return
+        try:
+            data = os.read(server, _CHUNK)
+        except (BlockingIOError, OSError):
+            return
+        if data and not self._batch:
+            self._batch_due = time.monotonic() + self.latency_s
+        self._batch += data
+
+    @classmethod
+    def _forward(cls, source: int, target: int) -> None:
         try:
             data = os.read(source, _CHUNK)
         except (BlockingIOError, OSError):
             return
+        cls._deliver(data, target)
+
+    @staticmethod
+    def _deliver(data: bytes, target: int) -> None:
         deadline = time.monotonic() + _WRITE_PATIENCE_S
         while data and time.monotonic() < deadline:
             try:

@@ -19,7 +19,9 @@ Every hook is called with keyword arguments only (pluggy's rule). The families:
 * application: ``labauto_register_applications`` — an application runs a whole analysis on an
   image, e.g. the plate analysis: ``application(image, params) -> object with to_dict()``.
 * drivers: ``labauto_register_drivers`` — ``register(kind, name, factory)`` where ``kind`` is
-  ``"robot"``, ``"analyzer"`` or ``"camera"`` and ``factory(config_section)`` builds a device.
+  ``"robot"``, ``"analyzer"`` or ``"camera"`` and ``factory(config_section)`` builds a device
+  satisfying the Protocol of that kind in :mod:`labauto.devices` (``Robot``, ``Analyzer``,
+  ``Camera``); the orchestrator relies on nothing else.
 * events: ``labauto_detections_stored``, ``labauto_pick_finished``, ``labauto_run_finished`` —
   called by the orchestrator after the fact, for exporters (a LIMS, a message bus). An exception
   in an event hook is logged in the run's audit log and does not stop the run.
@@ -31,6 +33,11 @@ from collections.abc import Callable
 from typing import Any
 
 import pluggy
+
+from labauto.devices import Analyzer, Camera, Robot
+
+#: A driver factory: ``factory(config_section)`` returns an unconnected device.
+DriverFactory = Callable[[Any], Robot | Analyzer | Camera]
 
 PROJECT_NAME = "labauto"
 ENTRY_POINT_GROUP = "labauto"
@@ -67,11 +74,13 @@ def labauto_register_applications(register: Callable[[str, Callable[..., Any]], 
 
 
 @hookspec
-def labauto_register_drivers(register: Callable[[str, str, Callable[..., Any]], None]) -> None:
+def labauto_register_drivers(register: Callable[[str, str, DriverFactory], None]) -> None:
     """Register device drivers: ``register(kind, name, factory)``.
 
     ``kind`` is ``"robot"``, ``"analyzer"`` or ``"camera"``; ``factory(section)`` receives the
-    validated config section of that device and returns an unconnected device object.
+    validated config section of that device and returns an unconnected device satisfying
+    :class:`labauto.devices.Robot`, :class:`~labauto.devices.Analyzer` or
+    :class:`~labauto.devices.Camera`.
     """
 
 

@@ -6,17 +6,26 @@
 * camera ``folder`` (image files or a folder; ``samples`` for the bundled plates) and
   ``simulated`` (freshly generated synthetic plates).
 
+Each factory takes its validated config section and returns an unconnected device typed by
+the Protocols of :mod:`labauto.devices` (``Robot``, ``Analyzer``, ``Camera``).
+
 With ``simulate: true`` in its config section, a robot or analyzer factory first starts the
 simulated device (a GRBL gantry behind a pseudo-terminal or TCP socket, a pymodbus server on
 127.0.0.1 or an RTU server on a pseudo-terminal) and points the real driver at it: only the
-transport's far end is simulated, never the driver. Closing the device stops its simulator.
+transport's far end is simulated, never the driver. The device returned is the real driver
+class extended by one thing, :class:`SimulatedGrblRobot` / :class:`SimulatedModbusAnalyzer`:
+it owns the simulator (``simulator``), and ``close()`` stops it (``reconnect()`` does not).
+The simulated gantry's machine space follows the configured limits: limits starting at 0 model
+a GRBL build with ``HOMING_FORCE_SET_ORIGIN`` (X/Y homing to their minimum), limits ending at
+0 a stock build.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from labauto.drivers.analyzer import Analyzer
+from labauto.devices import Analyzer, Camera, Robot
+from labauto.drivers.analyzer import Analyzer as ModbusAnalyzer
 from labauto.drivers.analyzer_sim import SimulatedAnalyzer
 from labauto.drivers.camera import FolderCamera, SimulatedCamera
 from labauto.drivers.grbl import GrblRobot
@@ -25,30 +34,40 @@ from labauto.drivers.grbl_sim import SimulatedGantry
 from labauto.hookspecs import hookimpl
 
 
-class Simulated:
-    """A real driver talking to a simulated device it owns; ``close()`` stops both."""
+class SimulatedGrblRobot(GrblRobot):
+    """The GRBL driver talking to a :class:`SimulatedGantry` it owns; ``close()`` stops both."""
 
-    def __init__(self, device: Any, simulator: Any) -> None:
-        object.__setattr__(self, "device", device)
-        object.__setattr__(self, "simulator", simulator)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.device, name)
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        setattr(self.device, name, value)  # e.g. on_exchange: it belongs to the driver
+    def __init__(self, url: str, simulator: SimulatedGantry, **options: Any) -> None:
+        super().__init__(url, **options)
+        self.simulator = simulator
 
     def close(self) -> None:
+        """Close the link, then stop the simulator (idempotent)."""
         try:
-            self.device.close()
+            super().close()
         finally:
             self.simulator.stop()
 
 
-def make_grbl_robot(section: Any) -> GrblRobot | Simulated:
+class SimulatedModbusAnalyzer(ModbusAnalyzer):
+    """The Modbus driver talking to a :class:`SimulatedAnalyzer` it owns; ``close()`` stops both."""
+
+    def __init__(self, simulator: SimulatedAnalyzer, *args: Any, **options: Any) -> None:
+        super().__init__(*args, **options)
+        self.simulator = simulator
+
+    def close(self) -> None:
+        """Close the link, then stop the simulator (idempotent)."""
+        try:
+            super().close()
+        finally:
+            self.simulator.stop()
+
+
+def make_grbl_robot(section: Any) -> Robot:
     """A ``GrblRobot`` from a ``robot`` config section (with its simulator if simulated)."""
     limits = TravelLimits(x=section.limits_x_mm, y=section.limits_y_mm, z=section.limits_z_mm)
-    options = dict(
+    options: dict[str, Any] = dict(
         baudrate=section.baudrate,
         timeout=section.timeout_s,
         limits=limits,
@@ -62,20 +81,26 @@ def make_grbl_robot(section: Any) -> GrblRobot | Simulated:
         return GrblRobot(section.port, **options)
     sim = section.simulator
     gantry = SimulatedGantry(limits, speed_factor=sim.speed_factor, faults=sim.faults)
-    url = gantry.start_pty() if sim.transport == "pty" else gantry.start_tcp()
-    return Simulated(GrblRobot(url, **options), gantry)
+    try:
+        url = gantry.start_pty() if sim.transport == "pty" else gantry.start_tcp()
+        return SimulatedGrblRobot(url, gantry, **options)
+    except BaseException:
+        gantry.stop()
+        raise
 
 
-def make_modbus_analyzer(section: Any) -> Analyzer | Simulated:
+def make_modbus_analyzer(section: Any) -> Analyzer:
     """An ``Analyzer`` from an ``analyzer`` config section (with its simulator if simulated)."""
-    options = dict(
+    options: dict[str, Any] = dict(
         register_map=section.register_map,
         timeout=section.timeout_s,
         unit_id=section.unit,
         baudrate=section.baudrate,
+        parity=getattr(section, "parity", "E"),  # RTU framing; 8E1 is Modbus's default
+        stopbits=getattr(section, "stopbits", 1),
     )
     if not section.simulate:
-        return Analyzer(
+        return ModbusAnalyzer(
             section.transport,
             host=section.host,
             port=section.port,
@@ -88,21 +113,26 @@ def make_modbus_analyzer(section: Any) -> Analyzer | Simulated:
         analysis_seconds=sim.analysis_seconds,
         speed_factor=sim.speed_factor,
         faults=sim.faults,
+        scan_cycle_s=getattr(sim, "scan_cycle_s", 0.0),
     )
-    if sim.transport == "tcp":
-        host, port = server.start_tcp("127.0.0.1")
-        device = Analyzer("tcp", host=host, port=port, **options)
-    else:
-        device = Analyzer("rtu", serial_port=server.start_rtu(), **options)
-    return Simulated(device, server)
+    try:
+        if sim.transport == "tcp":
+            host, port = server.start_tcp("127.0.0.1")
+            return SimulatedModbusAnalyzer(server, "tcp", host=host, port=port, **options)
+        # A Linux pty refuses even parity (EINVAL) and carries no parity bits anyway.
+        options["parity"] = "N"
+        return SimulatedModbusAnalyzer(server, "rtu", serial_port=server.start_rtu(), **options)
+    except BaseException:
+        server.stop()
+        raise
 
 
-def make_folder_camera(section: Any) -> FolderCamera:
+def make_folder_camera(section: Any) -> Camera:
     """A ``FolderCamera`` from a ``camera`` config section."""
     return FolderCamera(section.path, section.pattern)
 
 
-def make_simulated_camera(section: Any) -> SimulatedCamera:
+def make_simulated_camera(section: Any) -> Camera:
     """A camera of freshly generated synthetic plates (``camera.count`` of them)."""
     return SimulatedCamera(count=section.count)
 

@@ -29,7 +29,7 @@ import contextlib
 import hashlib
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -38,6 +38,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from labauto.config import Config, plate_params
+from labauto.devices import Analyzer, Camera, Robot
 from labauto.drivers.errors import DeviceError, DeviceRefused
 from labauto.errors import RunError
 from labauto.orchestrator.calibration import Calibration
@@ -60,9 +61,9 @@ class Reporter(Protocol):
 class Workcell:
     """The connected devices of a run. ``close()`` disconnects them and stops simulators."""
 
-    robot: Any
-    analyzer: Any
-    camera: Iterable[tuple[str, np.ndarray]]
+    robot: Robot
+    analyzer: Analyzer
+    camera: Camera
     closers: list[Callable[[], None]] = field(default_factory=list)
 
     def close(self) -> None:

@@ -58,7 +58,8 @@ class SimPool:
         if transport == "tcp":
             host, port = sim.start_tcp()
             return sim, {"transport": "tcp", "host": host, "port": port}
-        return sim, {"transport": "rtu", "serial_port": sim.start_rtu()}
+        # A Linux pty refuses even parity (EINVAL) and carries no parity bits: 8N1 here.
+        return sim, {"transport": "rtu", "serial_port": sim.start_rtu(), "parity": "N"}
 
     def close(self) -> None:
         for sim in self.sims:

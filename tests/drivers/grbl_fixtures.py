@@ -13,7 +13,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from labauto.drivers.grbl import GrblRobot
+from labauto.drivers.grbl import GrblRobot, TravelLimits
 from labauto.drivers.grbl_sim import SimulatedGantry
 
 TRANSPORTS = ("pty", "tcp")
@@ -21,6 +21,9 @@ SPEED = 200.0  # simulated durations / 200: a 300 mm travel takes 30 ms
 SLOW_SPEED = 10.0  # for tests that must catch a move in progress: 200 mm take 0.4 s
 REPLY_TIMEOUT_S = 0.3  # what the driver waits for a reply (each no-reply test costs this)
 MOTION_TIMEOUT_S = 5.0
+#: The deck of most driver tests: a HOMING_FORCE_SET_ORIGIN build with X/Y homing to their
+#: minimum, so positions read like the bed (the stock build's negative space has its own tests).
+DECK = TravelLimits(x=(0.0, 300.0), y=(0.0, 200.0), z=(-50.0, 0.0))
 _THREAD_NAME = "labauto-grbl-sim"
 
 
@@ -45,6 +48,8 @@ def make_robot(url: str, **kwargs: Any) -> GrblRobot:
     kwargs.setdefault("timeout", REPLY_TIMEOUT_S)
     kwargs.setdefault("motion_timeout", MOTION_TIMEOUT_S)
     kwargs.setdefault("poll_interval", 0.005)
+    kwargs.setdefault("boot_timeout", 0.0)
+    kwargs.setdefault("limits", DECK)
     return GrblRobot(url, **kwargs)
 
 
@@ -56,6 +61,7 @@ def _sim_threads() -> list[threading.Thread]:
 def gantry(**kwargs: Any) -> Iterator[SimulatedGantry]:
     """A simulated gantry (``speed_factor=SPEED`` unless given), stopped and checked on exit."""
     kwargs.setdefault("speed_factor", SPEED)
+    kwargs.setdefault("limits", DECK)
     before = set(_sim_threads())
     sim = SimulatedGantry(**kwargs)
     try:

@@ -84,7 +84,7 @@ def test_long_delay_is_a_timeout_and_the_late_ok_is_not_misread(
         robot.unlock()
     robot.reconnect()  # the late "ok" of $X comes before the answer to $I and is skipped
     tail = log[log.index(("tx", "$I"), 2) :]
-    assert [line for _, line in tail[:4]] == ["$I", "ok", "[VER:1.1h.20190830:]", "[OPT:V,15,128]"]
+    assert [line for _, line in tail[:4]] == ["$I", "ok", "[VER:1.1h.20190830:]", "[OPT:VZ,15,128]"]
     works_after_reconnect(robot)
 
 

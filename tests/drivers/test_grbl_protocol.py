@@ -10,15 +10,20 @@ from labauto.drivers.grbl_protocol import (
     ALARM_MEANINGS,
     ERROR_MEANINGS,
     KNOWN_STATES,
+    BuildOptions,
     ReplyKind,
     TravelLimits,
     alarm_meaning,
     classify_reply,
     error_meaning,
     format_axis_words,
+    machine_space,
     parse_banner,
+    parse_build_options,
     parse_status,
     parse_version_feedback,
+    startup_block,
+    travel_problems,
 )
 
 # --------------------------------------------------------------------------- status reports
@@ -116,9 +121,10 @@ def test_parse_status_rejects_malformed_reports(line: str, message: str) -> None
         ("<Idle|MPos:0.000,0.000,0.000|FS:0,0>", ReplyKind.STATUS, None),
         ("[MSG:'$H'|'$X' to unlock]", ReplyKind.PUSH, None),
         ("[MSG:Reset to continue]", ReplyKind.PUSH, None),
+        (">G1X5:error:22", ReplyKind.STARTUP, 22),
         ("[VER:1.1h.20190830:]", ReplyKind.PUSH, None),
         ("[GC:G0 G54 G17 G21 G90 G94 M5 M9 T0 F0 S0]", ReplyKind.PUSH, None),
-        (">G54:ok", ReplyKind.PUSH, None),
+        (">G54:ok", ReplyKind.STARTUP, None),
         ("$130=300.000", ReplyKind.SETTING, None),
         ("", ReplyKind.EMPTY, None),
         ("\r\n", ReplyKind.EMPTY, None),
@@ -171,7 +177,8 @@ def test_parse_version_feedback(line: str, version: str | None) -> None:
 
 def test_error_and_alarm_tables_cover_grbl_1_1() -> None:
     assert set(ERROR_MEANINGS) == set(range(1, 18)) | set(range(20, 39))
-    assert set(ALARM_MEANINGS) == set(range(1, 10))
+    assert set(ALARM_MEANINGS) == set(range(1, 11))
+    assert "Second dual axis limit switch" in alarm_meaning(10)
     assert "locked out during alarm" in error_meaning(9)
     assert "Feed rate has not yet been set" in error_meaning(22)
     assert "Hard limit" in alarm_meaning(1)
@@ -184,8 +191,14 @@ def test_error_and_alarm_tables_cover_grbl_1_1() -> None:
 # --------------------------------------------------------------------------- limits, formatting
 
 
-def test_travel_limits_violation_names_axis_value_and_range() -> None:
+def test_default_travel_is_the_negative_space_of_a_stock_grbl_build() -> None:
     limits = TravelLimits()
+    assert (limits.x, limits.y, limits.z) == ((-300.0, 0.0), (-200.0, 0.0), (-50.0, 0.0))
+    assert limits.violation(x=10.0) == "x=10.0 is outside the travel limits [-300.0, 0.0] mm"
+
+
+def test_travel_limits_violation_names_axis_value_and_range() -> None:
+    limits = TravelLimits(x=(0.0, 300.0), y=(0.0, 200.0), z=(-50.0, 0.0))
     assert limits.violation(x=0, y=200, z=-50) is None  # bounds are inside
     assert limits.violation(x=300.0001) == (
         "x=300.0001 is outside the travel limits [0.0, 300.0] mm"
@@ -210,3 +223,49 @@ def test_format_axis_words() -> None:
     assert format_axis_words(X=1, Y=None, Z=-2.5, F=600) == "X1.000 Z-2.500 F600.000"
     assert format_axis_words(X=0.0004) == "X0.000"
     assert format_axis_words() == ""
+
+
+# --------------------------------------------------------------------------- build options, space
+
+STOCK = {23: "0", 130: "200.000", 131: "150.000", 132: "50.000"}
+
+
+def test_build_options_and_startup_block_results_are_parsed() -> None:
+    options = parse_build_options("[OPT:VZ,15,128]")
+    assert options == BuildOptions("VZ", 15, 128) and options.homing_force_origin
+    assert not parse_build_options("[OPT:V,15,128]").homing_force_origin  # type: ignore[union-attr]
+    assert parse_build_options("[VER:1.1h.20190830:]") is None
+    assert startup_block(">G1X5:error:22") == ("G1X5", 22)
+    assert startup_block(">G21 G90:ok") == ("G21 G90", None)
+    assert startup_block("ok") is None
+
+
+def test_machine_space_follows_the_sign_convention_of_the_build() -> None:
+    assert machine_space(STOCK, BuildOptions("V")) == {
+        "x": (-200.0, 0.0), "y": (-150.0, 0.0), "z": (-50.0, 0.0)
+    }  # fmt: skip
+    # $23 alone changes nothing without HOMING_FORCE_SET_ORIGIN
+    assert machine_space({**STOCK, 23: "3"}, BuildOptions("V"))["x"] == (-200.0, 0.0)
+    forced = machine_space({**STOCK, 23: "3"}, BuildOptions("VZ"))
+    assert forced == {"x": (0.0, 200.0), "y": (0.0, 150.0), "z": (-50.0, 0.0)}
+    assert machine_space({23: "0"}, BuildOptions("V")) is None
+
+
+def test_travel_problems_name_axis_ranges_settings_and_the_reason() -> None:
+    fits = TravelLimits(x=(-200.0, 0.0), y=(-100.0, -10.0), z=(-50.0, 0.0))
+    assert travel_problems(fits, STOCK, BuildOptions("V")) == []
+    positive = TravelLimits(x=(0.0, 300.0), y=(0.0, 200.0), z=(-50.0, 0.0))
+    problems = travel_problems(positive, STOCK, BuildOptions("V"))
+    assert len(problems) == 2
+    assert problems[0] == (
+        "x limits [0, 300] mm leave the controller's travel [-200, 0] mm ($130=200.000, $23=0, "
+        "no HOMING_FORCE_SET_ORIGIN: the home corner is 0 and the travel is negative)"
+    )
+    assert problems[1].startswith("y limits [0, 200] mm leave the controller's travel [-150, 0]")
+    too_long = travel_problems(positive, {**STOCK, 23: "3"}, BuildOptions("VZ"))
+    assert too_long == [
+        "x limits [0, 300] mm leave the controller's travel [0, 200] mm ($130=200.000, $23=3, "
+        "built with HOMING_FORCE_SET_ORIGIN)",
+        "y limits [0, 200] mm leave the controller's travel [0, 150] mm ($131=150.000, $23=3, "
+        "built with HOMING_FORCE_SET_ORIGIN)",
+    ]

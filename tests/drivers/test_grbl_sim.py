@@ -8,11 +8,11 @@ from collections.abc import Iterator
 
 import pytest
 import serial
-from grbl_fixtures import REPLY_TIMEOUT_S, SLOW_SPEED, TRANSPORTS, gantry, serve
+from grbl_fixtures import REPLY_TIMEOUT_S, SLOW_SPEED, TRANSPORTS, gantry, serve, wait_for
 
-from labauto.drivers.grbl import _close_quickly
 from labauto.drivers.grbl_protocol import ReplyKind, TravelLimits, classify_reply, parse_status
 from labauto.drivers.grbl_sim import SimulatedGantry
+from labauto.drivers.line_link import _close_quickly
 
 pytestmark = pytest.mark.timeout(15)
 
@@ -128,7 +128,7 @@ def test_gcode_answers(unlocked: RawLink, line: str, answer: str) -> None:
 
 def test_alarm_locks_gcode_but_not_system_commands(link: RawLink) -> None:
     assert link.ask("G0 X10") == ["error:9"]
-    assert link.ask("$I", 3) == ["[VER:1.1h.20190830:]", "[OPT:V,15,128]", "ok"]
+    assert link.ask("$I", 3) == ["[VER:1.1h.20190830:]", "[OPT:VZ,15,128]", "ok"]
     assert link.ask("$G", 2)[0].startswith("[GC:G0 G54 G17 G21 G90 G94 M5 M9")
     assert parse_status(link.status()).state == "Alarm"
 
@@ -164,9 +164,12 @@ def test_homing_reports_home_state_then_unlocks(transport: str) -> None:
         try:
             link.ask("G0 X100")
             link.ask("G4 P0")
-            link.send(b"$H\n")  # the ok waits for the end of homing; ? is answered at once
-            link.wait_for_state("Home")
-            assert link.lines(1) == ["ok"]
+            link.send(b"$H\n")  # the ok waits for the end of homing
+            assert wait_for(lambda: sim.state == "Home")
+            link.send(b"?")  # not answered during homing: the report comes when it ends
+            assert link.silent_for(0.05)
+            home, ok = link.lines(2)
+            assert parse_status(home).state == "Home" and ok == "ok"
             assert parse_status(link.status()).state == "Idle"
             assert sim.homed and sim.position == (0.0, 0.0, 0.0)
         finally:
@@ -180,10 +183,12 @@ def test_reset_during_homing_is_alarm_6(transport: str) -> None:
             link.ask("G0 X100")
             link.ask("G4 P0")
             link.send(b"$H\n")
-            link.wait_for_state("Home")
+            assert wait_for(lambda: sim.state == "Home")
             link.send(b"\x18")
-            assert link.lines(3) == [
+            assert link.lines(5) == [
                 "ALARM:6",
+                "ok",  # the aborted $H is answered, after GRBL's 500 ms alarm delay
+                "",
                 "Grbl 1.1h ['$' for help]",
                 "[MSG:'$H'|'$X' to unlock]",
             ]
@@ -196,11 +201,18 @@ def test_soft_limit_locks_until_reset(transport: str) -> None:
     with gantry(limits=TravelLimits(x=(0, 100), y=(0, 100), z=(-10, 0)), homing_lock=False) as sim:
         link = RawLink(serve(sim, transport))
         try:
-            assert link.ask("G0 X101", 2) == ["ALARM:2", "[MSG:Reset to continue]"]
+            assert link.ask("G0 X101") == ["ALARM:2"]
+            link.send(b"\x18")  # inside GRBL's 500 ms alarm delay: lost
+            assert link.lines(1) == ["[MSG:Reset to continue]"]
             link.send(b"?G0 X1\n")
             assert link.silent_for(REPLY_TIMEOUT_S)  # neither status nor lines are answered
             link.send(b"\x18")
-            assert link.lines(2) == ["Grbl 1.1h ['$' for help]", "[MSG:'$H'|'$X' to unlock]"]
+            assert link.lines(4) == [
+                "ok",  # the line the soft limit stopped
+                "",
+                "Grbl 1.1h ['$' for help]",
+                "[MSG:'$H'|'$X' to unlock]",
+            ]
             assert link.ask("$X", 2)[1] == "ok"
             assert sim.received[-2:] == ["G0 X1", "$X"]
         finally:
@@ -209,7 +221,8 @@ def test_soft_limit_locks_until_reset(transport: str) -> None:
 
 def test_feed_hold_from_idle_and_resume(unlocked: RawLink) -> None:
     unlocked.send(b"!")
-    assert parse_status(unlocked.status()).state == "Hold"
+    held = parse_status(unlocked.status())
+    assert (held.state, held.substate) == ("Hold", 0)
     unlocked.send(b"~")
     assert parse_status(unlocked.status()).state == "Idle"
 
@@ -220,7 +233,7 @@ def test_check_mode_parses_without_moving(unlocked: RawLink, sim: SimulatedGantr
     assert unlocked.ask("G0 X50") == ["ok"]
     assert unlocked.ask("G5") == ["error:20"]
     assert sim.position == (0.0, 0.0, 0.0)
-    assert unlocked.ask("$C", 3) == ["[MSG:Disabled]", "ok", "Grbl 1.1h ['$' for help]"]
+    assert unlocked.ask("$C", 4) == ["[MSG:Disabled]", "ok", "", "Grbl 1.1h ['$' for help]"]
     assert parse_status(unlocked.status()).state == "Idle"
 
 
@@ -230,10 +243,12 @@ def test_sleep_ignores_lines_until_reset(unlocked: RawLink) -> None:
     unlocked.send(b"G0 X1\n")
     assert unlocked.silent_for(0.05)
     unlocked.send(b"\x18")
-    assert unlocked.lines(2)[1] == "[MSG:'$H'|'$X' to unlock]"  # sleep wakes up in Alarm
+    assert unlocked.lines(3)[2] == "[MSG:'$H'|'$X' to unlock]"  # sleep wakes up in Alarm
 
 
 def test_outputs_show_in_status_and_parser_state(unlocked: RawLink, sim: SimulatedGantry) -> None:
+    first = parse_status(unlocked.status())  # GRBL: WCO first after start-up, Ov one later
+    assert first.work_offset == (0.0, 0.0, 0.0) and first.overrides is None
     assert unlocked.ask("M8") == ["ok"]
     assert parse_status(unlocked.status()).accessories == "F"
     assert " M8 " in unlocked.ask("$G", 2)[0]
