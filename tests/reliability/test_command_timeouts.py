@@ -38,7 +38,7 @@ def robot():
 @pytest.mark.parametrize("command", ["tool_on", "tool_off"])
 def test_lost_reply_to_a_tool_command_times_out_after_the_tool_timeout(robot, command):
     device, sim = robot
-    device.move_to(50.0, 50.0, -10.0)
+    device.move_to(-50.0, -50.0, -10.0)  # machine space of a stock GRBL build is negative
     sim.inject("no_reply", count=1)
     started = time.monotonic()
     with pytest.raises(DeviceTimeout):
@@ -53,7 +53,7 @@ def test_lost_reply_to_a_tool_command_times_out_after_the_tool_timeout(robot, co
 
 def test_tool_command_after_queued_motion_still_waits_for_the_motion(robot):
     device, _sim = robot
-    device.move_to(250.0, 150.0, wait=False)  # queued: GRBL answers M8 once it is done
+    device.move_to(-250.0, -150.0, wait=False)  # queued: GRBL answers M8 once it is done
     device.tool_on()  # waits for the motion first, then the short tool timeout applies
     assert device.status().state == "Idle"
     device.tool_off()

@@ -26,7 +26,7 @@ from reliability_helpers import (
     write_config,
 )
 
-from labauto.drivers.grbl_sim import SimulatedGantry
+from labauto.drivers.grbl_sim import SimulatedGantry, TravelLimits
 from labauto.errors import RunError
 from labauto.orchestrator.session import check_devices, open_run
 from labauto.store import Store
@@ -161,7 +161,9 @@ def test_a_dead_owner_on_this_host_is_taken_over_at_once(tmp_path, plugins, dead
 
 
 def test_one_serial_port_is_driven_by_one_run_at_a_time(tmp_path, plugins):
-    gantry = SimulatedGantry(speed_factor=400.0)
+    # the config's travel (0-300, 0-200 mm): a build with HOMING_FORCE_SET_ORIGIN
+    limits = TravelLimits(x=(0.0, 300.0), y=(0.0, 200.0), z=(-50.0, 0.0))
+    gantry = SimulatedGantry(speed_factor=400.0, limits=limits)
     port = gantry.start_pty()
     try:
         lock_dir = str(tmp_path / "locks")
