@@ -136,6 +136,8 @@ class AnalyzerSimulatorConfig(Section):
     speed_factor: Positive = 20.0
     transport: Literal["tcp", "rtu"] = "tcp"
     analysis_seconds: NonNegative = 2.0
+    #: Commands take effect at the next scan of this period (s), as on a PLC front-end; 0: at once.
+    scan_cycle_s: NonNegative = 0.0
     #: Faults active from the start, e.g. ``{error_state: 7}`` (see analyzer_sim).
     faults: Annotated[dict[str, int | None], AfterValidator(_analyzer_faults)] = {}
 
@@ -273,7 +275,10 @@ class AnalyzerConfig(Section):
     port: Annotated[int, Field(ge=0, le=65535)] = 502
     serial_port: str = "/dev/ttyUSB1"
     baudrate: Annotated[int, Field(gt=0)] = 19200
-    unit: Annotated[int, Field(ge=0, le=247)] = 1
+    unit: Annotated[int, Field(ge=1, le=247)] = 1
+    #: RTU framing (Modbus's default is 8E1: even parity, one stop bit).
+    parity: Literal["N", "E", "O"] = "E"
+    stopbits: Literal[1, 2] = 1
     #: A YAML register map; ``None`` uses the map shipped with labauto.
     register_map: Annotated[str | None, AfterValidator(_check_register_map)] = None
     timeout_s: Positive = 2.0

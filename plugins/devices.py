@@ -96,8 +96,8 @@ def make_modbus_analyzer(section: Any) -> Analyzer:
         timeout=section.timeout_s,
         unit_id=section.unit,
         baudrate=section.baudrate,
-        parity=getattr(section, "parity", "E"),  # RTU framing; 8E1 is Modbus's default
-        stopbits=getattr(section, "stopbits", 1),
+        parity=section.parity,  # RTU framing; 8E1 is Modbus's default
+        stopbits=section.stopbits,
     )
     if not section.simulate:
         return ModbusAnalyzer(
@@ -113,7 +113,7 @@ def make_modbus_analyzer(section: Any) -> Analyzer:
         analysis_seconds=sim.analysis_seconds,
         speed_factor=sim.speed_factor,
         faults=sim.faults,
-        scan_cycle_s=getattr(sim, "scan_cycle_s", 0.0),
+        scan_cycle_s=sim.scan_cycle_s,
     )
     try:
         if sim.transport == "tcp":

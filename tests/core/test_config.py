@@ -47,6 +47,8 @@ def test_defaults_describe_a_simulated_workcell():
         ("picking:\n  order: random\n", "picking.order: expected 'largest'"),
         ("plate:\n  detector:\n    bogus: 1\n", "plate.detector.bogus: unknown key"),
         ("plate:\n  min_width_mm: -5\n", "plate.min_width_mm: expected a value >= 0, got -5"),
+        ("analyzer:\n  unit: 0\n", "analyzer.unit: expected a value >= 1, got 0"),
+        ("analyzer:\n  parity: X\n", "analyzer.parity: expected 'N', 'E' or 'O'"),
         (
             "plate:\n  region: [1, 2]\n",
             "plate.region: expected one of: tuple[float, float, float]; "

@@ -249,3 +249,14 @@ def test_a_failed_soft_reset_during_an_estop_is_reported(make_config):
     assert outcome.error == "emergency stop; robot soft reset failed: robot port gone"
     events = store.events(outcome.run_id, "run.estop")
     assert any("soft reset failed" in e.message for e in events)
+
+
+def test_an_analyzer_with_a_scan_cycle_from_the_config_gets_every_result(make_config):
+    config = make_config(analyzer={"simulator": {"scan_cycle_s": 0.05, "speed_factor": 200.0}})
+    store = Store.open(config.database.url)
+    with open_run(config, store) as session:
+        assert session.runner.workcell.analyzer.simulator.scan_cycle_s == 0.05
+        outcome = session.execute()
+    assert outcome.state == "succeeded"
+    results = [p for p in store.picks_for_run(outcome.run_id) if p.state == "analyzed"]
+    assert len(results) == 3
