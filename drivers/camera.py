@@ -10,10 +10,11 @@ from collections.abc import Iterator
 from importlib import resources
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from labauto.drivers.errors import DeviceError
+from labauto.errors import ImageError
+from labauto.imageio import read_image
 
 #: The ``path`` that names the sample plates bundled with labauto.
 SAMPLES = "samples"
@@ -52,9 +53,10 @@ class FolderCamera:
 
     def __iter__(self) -> Iterator[tuple[str, np.ndarray]]:
         for file in self.files():
-            image = cv2.imread(str(file), cv2.IMREAD_COLOR)
-            if image is None:
-                raise DeviceError(f"{file}: not a readable image", device="camera")
+            try:  # the one image reader: 16-bit and float files scaled as for detect and plate
+                image = read_image(file)
+            except ImageError as exc:
+                raise DeviceError(str(exc), device="camera") from exc
             yield file.stem, image
 
 
