@@ -699,15 +699,7 @@ class Store:
         for i, row in enumerate(colonies):
             row = dict(row)
             detection_refs.append(row.pop("detection", None))
-            values = COLONY_ROW.normalise(i, row, {"run_id": run_id, "image_id": 0})
-            try:
-                values["klass"] = ColonyClass(values["klass"])
-            except ValueError:
-                raise InvalidValue(
-                    f"colonies row {i}: klass {values['klass']!r} is not one of "
-                    f"{[c.value for c in ColonyClass]}"
-                ) from None
-            colony_rows.append(values)
+            colony_rows.append(_colony_values(i, row, {"run_id": run_id, "image_id": 0}))
         pick_refs = []
         for i, row in enumerate(picks):
             ref = row.get("colony")
@@ -857,15 +849,7 @@ class Store:
         fixed = {"run_id": run_id, "image_id": image_id}
         prepared = []
         for i, row in enumerate(rows):
-            values = COLONY_ROW.normalise(i, row, fixed)
-            try:
-                values["klass"] = ColonyClass(values["klass"])
-            except ValueError:
-                raise InvalidValue(
-                    f"colonies row {i}: klass {values['klass']!r} is not one of "
-                    f"{[c.value for c in ColonyClass]}"
-                ) from None
-            prepared.append(values)
+            prepared.append(_colony_values(i, row, fixed))
         return self._bulk_insert("add_colonies", Colony, prepared)
 
     def colonies(self, run_id: int, image_id: int | None = None) -> list[ColonyRecord]:
@@ -1339,3 +1323,16 @@ class Store:
             select(table.c.id).order_by(table.c.id.desc()).limit(len(rows))
         ).all()
         return newest_first[::-1]
+
+
+def _colony_values(i: int, row: dict[str, Any], fixed: dict[str, Any]) -> dict[str, Any]:
+    """Colony row ``i`` normalised for an insert, its class checked (``InvalidValue`` if bad)."""
+    values = COLONY_ROW.normalise(i, row, fixed)
+    try:
+        values["klass"] = ColonyClass(values["klass"])
+    except ValueError:
+        raise InvalidValue(
+            f"colonies row {i}: klass {values['klass']!r} is not one of "
+            f"{[c.value for c in ColonyClass]}"
+        ) from None
+    return values
