@@ -7,33 +7,40 @@ species). Pure functions on arrays: no I/O.
 
 Pipeline and the choices it makes where the paper leaves room:
 
-1. **Dish.** Hough circle on a grey image subsampled to ~128 px, refined at full resolution:
-   along 180 rays the agar's edge is where the colour first departs from the agar's by more than
-   18 grey levels (meniscus or wall), taken at half that first peak's height (sub-pixel), and a
-   least-squares circle is fitted to those points, dropping outliers in three rounds (labels,
-   pen marks and colonies near the wall). The dish radius reads 0.2-2.3 px short of the drawn
-   agar edge on the synthetic plates (the dark meniscus ring starts inside it). The usable area
-   is the dish shrunk by ``rim_margin_px``, or a configured circle (``PlateParams.region``, also
-   shrunk) or polygon (used as is). Objects within 3 px of the usable area's border are ignored
-   (a colony cut by the rim margin cannot be picked).
-2. **Objects** (paper eq. 1, with no knowledge of the agar's colour). The background mean is
-   estimated from the dish itself, locally: on the dish subsampled by ``background_scale``, a
-   5x5 median gives a first estimate, pixels that deviate from it are masked out, and a
-   normalised Gaussian convolution of the remaining agar gives the background, resized back
-   (so a lighting gradient does not matter). A pixel is foreground when its summed squared
-   deviation from the background over B, G, R (optionally weighted) exceeds
-   ``color_threshold``; contours are traced in the 8-neighbourhood (OpenCV). The gradient at
-   each contour point is a 5x5 Sobel of that deviation image: it points into every object,
-   whatever its colour. D_alpha, the centroid and the centroid-inside test come from
-   :func:`labauto.vision.shape_angle.shape_angles`, vectorised over all contours.
-   ``method="detector"`` uses :func:`labauto.vision.detector.detect` instead (slower).
+0. **Scale.** Every size is in millimetres (``PlateParams``) and is turned into pixels from the
+   dish found (its diameter is ``dish_diameter_mm``) or a calibrated ``px_per_mm``; images finer
+   than ``analysis_px_per_mm`` are analysed on a resampled copy and the results mapped back
+   (:mod:`labauto.vision.plate_scale`). Below, "px" means pixels of that working copy.
+1. **Dish.** :func:`labauto.vision.dish.find_dish`: a Hough circle on a subsampled grey image,
+   refined along rays where the colour leaves the agar's for about a millimetre (the meniscus or
+   the wall, not a thin lid line), with a robust circle fit. It reads 0.2-2.3 px short of the
+   drawn agar edge on the synthetic plates. A dish with over a quarter of its rim outside the
+   image is refused (``detect_dish=False`` analyses the whole image). The usable area is the
+   dish shrunk by ``rim_margin_mm`` (negative grows it), or a configured circle
+   (``PlateParams.region``, also shrunk) or polygon (used as is). Bodies touching the usable
+   area's border are kept (colonies at the meniscus), unless ``drop_at_border``.
+2. **Objects** (paper eq. 1, with no knowledge of the agar's colour). The background is
+   estimated from the dish itself (:mod:`labauto.vision.plate_background`): medians over cells
+   of ~0.8 mm (a ~25 mm and a ~4 mm window) mark what is not agar, a normalised Gaussian
+   convolution of the rest gives the local agar colour, and the outer ``rim_band_mm`` follow
+   the dish's radial profile (the meniscus). A pixel is foreground when its summed squared
+   deviation from the background over B, G, R (optionally weighted) exceeds ``t``
+   (``color_threshold``, or a multiple of the agar's noise); lines thinner than ``open_mm``
+   are opened away so colonies touching them come apart, and fragments of thick strokes are
+   dropped. Outer contours of all bodies, also those lying in another's hole, are traced in
+   the 8-neighbourhood (OpenCV). The gradient at each contour point is a 5x5 Sobel of the
+   deviation image: it points into every object, whatever its colour. D_alpha, the centroid and
+   the centroid-inside test come from :func:`labauto.vision.shape_angle.shape_angles`,
+   vectorised over all contours. ``method="detector"`` uses
+   :func:`labauto.vision.detector.detect` instead (slower).
 3. **Artefacts** are dropped, in this order: ``area < min_colony_area_px`` (dust) or
    ``> max_colony_area_px``; mean width ``2 * area / perimeter < min_width_px`` (scratches, thin
    pen strokes: a disc of radius r gives r, a strip of width w gives w); elongation
    ``sqrt(l1 / l2)`` of the second moments above ``max_elongation`` (glare streaks, straight
    strokes; the paper's DES limit is about 1:4); area above ``max_fill_ratio`` times the largest
-   inscribed disc (curved or closed pen writing). The body's mask is its filled contour
-   restricted to the foreground (a loop of ink is not solid) and closed with a 5x5 disc.
+   inscribed disc (curved or closed pen writing); printed or written ink (black or blue, stroke-
+   shaped, dot-sized or dotted: :mod:`labauto.vision.plate_ink`). The body's mask is its filled
+   contour restricted to the foreground (a loop of ink is not solid) and closed with a 5x5 disc.
 4. **Classes.** Authentic: a DES, i.e. centroid inside and D_alpha (median by default) below
    ``des_threshold_deg``, and no waist: the deepest concavity (distance from the convex hull)
    is below ``max_concavity`` times the inscribed radius. D_alpha alone does not separate a
