@@ -1,0 +1,53 @@
+"""The pieces of the plate background, on drawn masks and images with known answers."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from labauto.vision.plate_background import (
+    deviation,
+    local_background,
+    open_thin_lines,
+    with_radial_rim,
+)
+
+
+def test_a_thin_line_is_cut_away_from_the_colony_it_touches() -> None:
+    fg = np.zeros((200, 300), np.uint8)
+    cv2.circle(fg, (150, 100), 12, 255, -1)  # a colony
+    cv2.line(fg, (0, 112), (299, 112), 255, 3)  # the lid's edge, touching it
+    n_before, _ = cv2.connectedComponents(fg)
+    out = open_thin_lines(fg, 9)
+    n_after, _ = cv2.connectedComponents(out)
+    assert n_before - 1 == 1 and n_after - 1 == 1  # one body before (joined), one after: the colony
+    ys, xs = np.nonzero(out)
+    assert abs(xs.mean() - 150) < 1.5 and abs(ys.mean() - 100) < 1.5
+    assert out[112, 20] == 0 and out[112, 280] == 0  # the line is gone
+
+
+def test_the_stub_of_a_thick_stroke_is_dropped_and_a_lone_colony_kept() -> None:
+    fg = np.zeros((200, 300), np.uint8)
+    cv2.line(fg, (20, 50), (280, 50), 255, 5)  # a pen stroke, thinner than the disc...
+    cv2.circle(fg, (150, 50), 5, 255, -1)  # ...with a blot where it is wider (a crossing)
+    cv2.circle(fg, (150, 150), 10, 255, -1)
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
+    assert cv2.morphologyEx(fg, cv2.MORPH_OPEN, disc)[50, 150] == 255  # a plain opening keeps it
+    out = open_thin_lines(fg, 9)
+    assert out[150, 150] == 255
+    assert not out[:100].any()
+
+
+def test_the_meniscus_ring_goes_into_the_background() -> None:
+    img = np.full((400, 400, 3), 120, np.uint8)
+    cv2.circle(img, (200, 200), 176, (60, 60, 60), 6)  # a dark meniscus ring near the edge
+    cv2.circle(img, (200, 60), 6, (200, 200, 200), -1)  # a colony inside, away from it
+    usable = np.zeros((400, 400), np.uint8)
+    cv2.circle(usable, (200, 200), 182, 255, -1)
+    bg = local_background(img, usable, 8, 600.0)
+    ring_before = deviation(img, bg, (1.0, 1.0, 1.0))[200, 376]
+    bg = with_radial_rim(img, bg, (200.0, 200.0, 182.0), 40.0)
+    dev = deviation(img, bg, (1.0, 1.0, 1.0))
+    assert ring_before > 3000  # the cell background does not follow a 6 px ring
+    assert dev[200, 376] < 300 and dev[24, 200] < 300  # the radial profile does, all round
+    assert dev[60, 200] > 3000  # the colony still stands out
