@@ -238,6 +238,9 @@ def open_thin_lines(fg: np.ndarray, size: int) -> np.ndarray:
     such a fragment when the pixels the opening removed within ``size`` px around it outnumber
     ``_FRAGMENT_RATIO`` of its own area (a colony that a line crossed loses a few line pixels
     around it; a piece of a stroke is flanked by the rest of the stroke) and is dropped.
+    Limit: a stroke nearly as wide as the disc, or a blot on it wider than ~1.3 times the
+    stroke, leaves pieces this rule keeps; black and blue ones are caught later as ink
+    (:mod:`labauto.vision.plate_ink`).
     """
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
     opened = cv2.morphologyEx(fg, cv2.MORPH_OPEN, disc)
