@@ -25,7 +25,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Analyzer", "Camera", "ExchangeCallback", "Robot", "RobotStatus"]
+__all__ = ["Analyzer", "Camera", "Device", "ExchangeCallback", "Robot", "RobotStatus"]
 
 #: ``callback(direction, text)`` with direction ``"tx"`` or ``"rx"``.
 ExchangeCallback = Callable[[str, str], None]
@@ -42,14 +42,14 @@ class RobotStatus(Protocol):
 
 
 @runtime_checkable
-class Robot(Protocol):
-    """A picking robot: moves in deck millimetres, takes and delivers probes."""
+class Device(Protocol):
+    """What every device of the workcell has: a name, an exchange log, a link to manage."""
 
     name: str
     on_exchange: ExchangeCallback | None
 
     def connect(self) -> None:
-        """Open the link and identify the controller."""
+        """Open the link and check that the device answers (a robot: identify the controller)."""
 
     def close(self) -> None:
         """Release the device (idempotent)."""
@@ -60,6 +60,11 @@ class Robot(Protocol):
     def identify(self) -> Mapping[str, Any]:
         """What ``labauto devices check`` shows."""
         ...
+
+
+@runtime_checkable
+class Robot(Device, Protocol):
+    """A picking robot: moves in deck millimetres, takes and delivers probes."""
 
     def status(self) -> RobotStatus:
         """The current state and position."""
@@ -91,24 +96,8 @@ class Robot(Protocol):
 
 
 @runtime_checkable
-class Analyzer(Protocol):
+class Analyzer(Device, Protocol):
     """An analyzer that measures a delivered sample."""
-
-    name: str
-    on_exchange: ExchangeCallback | None
-
-    def connect(self) -> None:
-        """Open the link and check that the analyzer answers."""
-
-    def close(self) -> None:
-        """Release the device (idempotent)."""
-
-    def reconnect(self) -> None:
-        """Renew the link after a failure."""
-
-    def identify(self) -> Mapping[str, Any]:
-        """What ``labauto devices check`` shows."""
-        ...
 
     def analyze(self, sample_id: str, timeout: float = 60.0) -> Mapping[str, Any]:
         """Measure ``sample_id`` and return its named results."""
