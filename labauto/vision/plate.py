@@ -520,14 +520,6 @@ def _usable_area(
 # Segmentation (eq. 1 with a local background)
 
 
-def _deviation(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> np.ndarray:
-    """Eq. 1's summed squared colour deviation from the local background (float32, ROI-sized).
-
-    See :mod:`labauto.vision.plate_background` for how the background is found.
-    """
-    return deviation(roi, _background(roi, usable, params), params.channel_weights)
-
-
 def _background(
     roi: np.ndarray, usable: np.ndarray, params: PlateParams, rim: Circle | None = None
 ) -> np.ndarray:

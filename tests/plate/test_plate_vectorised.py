@@ -8,7 +8,6 @@ merged counts for all bodies at once. These tests keep the straightforward per-b
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -17,6 +16,7 @@ import pytest
 from labauto.vision import dish as dish_module
 from labauto.vision import plate as plate_module
 from labauto.vision.plate import PlateParams, analyze_plate
+from labauto.vision.plate_background import deviation
 
 PAD = plate_module._PAD
 DISC5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
@@ -153,10 +153,11 @@ def test_unit_weight_deviation_equals_the_weighted_formula(plates: list) -> None
     img, _ = plates[4]
     _, copy, params, (x0, y0), usable, _ = plate_module.prepare_plate(img, PlateParams())
     roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
-    fast = plate_module._deviation(roi, usable, params)
-    general = plate_module._deviation(roi, usable, replace(params, channel_weights=[1.0, 1.0, 1.0]))
-    np.testing.assert_array_equal(fast, general)
-    halved = plate_module._deviation(roi, usable, replace(params, channel_weights=(0.5, 0.5, 0.5)))
+    background = plate_module._background(roi, usable, params)
+    fast = deviation(roi, background, (1.0, 1.0, 1.0))  # the channel-by-channel path
+    diff = roi.astype(np.float32) - background.astype(np.float32)
+    np.testing.assert_array_equal(fast, (diff * diff).sum(axis=2))  # the formula, in full
+    halved = deviation(roi, background, (0.5, 0.5, 0.5))  # the weighted (LUT) path
     np.testing.assert_allclose(halved, fast / 2, rtol=1e-6)
 
 
