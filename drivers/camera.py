@@ -1,4 +1,4 @@
-"""Camera sources: image files or a folder of them, and a simulated camera of generated plates.
+"""Camera sources: image files or a folder of them (simulated: ``labauto.synthetic.camera``).
 
 A camera is an iterable of ``(name, image)`` pairs, ``image`` a BGR ``uint8`` array. A real
 camera is a plugin that registers a ``camera`` driver with the same shape.
@@ -58,18 +58,3 @@ class FolderCamera:
             except ImageError as exc:
                 raise DeviceError(str(exc), device="camera") from exc
             yield file.stem, image
-
-
-class SimulatedCamera:
-    """Serve ``count`` synthetic plates generated from consecutive seeds."""
-
-    def __init__(self, count: int = 3, first_seed: int = 0) -> None:
-        self.count = count
-        self.first_seed = first_seed
-
-    def __iter__(self) -> Iterator[tuple[str, np.ndarray]]:
-        from labauto.synthetic.plates import generate_plate
-
-        for seed in range(self.first_seed, self.first_seed + self.count):
-            image, _truth = generate_plate(seed)
-            yield f"simulated-{seed:04d}", image

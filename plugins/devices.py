@@ -27,11 +27,12 @@ from typing import Any
 from labauto.devices import Analyzer, Camera, Robot
 from labauto.drivers.analyzer import Analyzer as ModbusAnalyzer
 from labauto.drivers.analyzer_sim import SimulatedAnalyzer
-from labauto.drivers.camera import FolderCamera, SimulatedCamera
+from labauto.drivers.camera import FolderCamera
 from labauto.drivers.grbl import GrblRobot
 from labauto.drivers.grbl_protocol import TravelLimits
 from labauto.drivers.grbl_sim import SimulatedGantry
 from labauto.hookspecs import hookimpl
+from labauto.synthetic.camera import SimulatedCamera
 
 
 class SimulatedGrblRobot(GrblRobot):

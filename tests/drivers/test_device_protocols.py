@@ -10,10 +10,11 @@ from grbl_fixtures import wait_for
 from labauto.config import Config, load_config
 from labauto.devices import Analyzer, Camera, Robot
 from labauto.drivers.analyzer import Analyzer as ModbusAnalyzer
-from labauto.drivers.camera import FolderCamera, SimulatedCamera
+from labauto.drivers.camera import FolderCamera
 from labauto.drivers.grbl import GrblRobot, TravelLimits
 from labauto.drivers.grbl_sim import SimulatedGantry
 from labauto.plugins import devices
+from labauto.synthetic.camera import SimulatedCamera
 
 
 def sim_threads() -> set[str]:
