@@ -478,6 +478,7 @@ def generate_plate(
     noise_sigma: float = 2.5,
     colony_scale: float = 1.0,
     faint_fraction: float = 0.0,
+    faint_contrast: float = 0.25,
     n_meniscus: int = 0,
     lid_label: bool = False,
 ) -> tuple[np.ndarray, PlateTruth]:
@@ -504,8 +505,12 @@ def generate_plate(
         Colony sizes relative to the default 9-24 px radius (at 1024 px); with a large
         ``n_authentic`` this makes a crowded plate (e.g. 0.3 and 1000 colonies).
     faint_fraction : float
-        Share of the authentic colonies drawn faint and translucent: a quarter of their colour's
-        difference from the agar (a few grey levels of contrast, as on real pale agar).
+        Share of the authentic colonies drawn faint and translucent: ``faint_contrast`` of their
+        colour's difference from the agar.
+    faint_contrast : float
+        Share (0-1] of a faint colony's colour difference from the agar that is drawn: 0.25 gives
+        10-25 grey levels of contrast, 0.08 the 3-8 levels of large translucent colonies on pale
+        agar (the AGAR photographs).
     n_meniscus : int
         Authentic colonies drawn touching the meniscus (their centre half a radius inside the
         agar's edge, cut by it).
@@ -535,6 +540,8 @@ def generate_plate(
             f"colony_scale must be > 0, faint_fraction in [0, 1] and n_meniscus >= 0, got "
             f"{colony_scale}, {faint_fraction}, {n_meniscus}"
         )
+    if not 0 < faint_contrast <= 1:
+        raise ValueError(f"faint_contrast must be in (0, 1], got {faint_contrast}")
     rng = np.random.default_rng(seed)
     if agar is None:
         agar = sorted(AGAR_COLOURS_RGB)[int(rng.integers(len(AGAR_COLOURS_RGB)))]
@@ -646,7 +653,7 @@ def generate_plate(
         near = kind == "authentic" and rng.uniform() < 0.2
         colour = _pick_colour(rng, agar_rgb, near_agar=near)
         if kind == "authentic" and faint_fraction > 0 and rng.uniform() < faint_fraction:
-            colour = agar_rgb + 0.25 * (colour - agar_rgb)  # faint and translucent
+            colour = agar_rgb + faint_contrast * (colour - agar_rgb)  # faint and translucent
             near = True
         style = ""
         if kind == "mixed":

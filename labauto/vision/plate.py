@@ -86,6 +86,7 @@ from labauto.vision.plate_background import (
     open_thin_lines,
     with_radial_rim,
 )
+from labauto.vision.plate_faint import faint_bodies
 from labauto.vision.plate_ink import ink_bodies
 from labauto.vision.plate_scale import WorkingCopy, image_scale, pixel_params, working_copy
 from labauto.vision.shape_angle import shape_angles
@@ -193,6 +194,11 @@ class PlateParams:
         Width of the band inside the agar's edge whose background follows the dish's radial
         profile (the meniscus; see :func:`labauto.vision.plate_background.with_radial_rim`);
         0 turns it off.
+    faint_factor : float
+        Faint colonies (:mod:`labauto.vision.plate_faint`): a smoothed departure from a coarse
+        background this many times the agar's own is foreground; 0 turns the pass off.
+    faint_min_diameter_mm, faint_max_diameter_mm : float
+        Sizes (as discs) of the faint bodies kept.
     drop_at_border : bool
         Drop bodies within 3 px of the usable area's border (cut by it). False (default): a
         colony at the meniscus is found and counted; picking keeps its own distance from the
@@ -238,6 +244,9 @@ class PlateParams:
     valley_ratio: float = 0.9
     reject_ink: bool = True
     drop_at_border: bool = False
+    faint_factor: float = 4.0
+    faint_min_diameter_mm: float = 2.0
+    faint_max_diameter_mm: float = 12.0
     rim_band_mm: float = 4.0
     detector: DetectorParams = field(default_factory=lambda: DetectorParams(method="color"))
 
@@ -257,6 +266,7 @@ class PlateParams:
             "mix_residual",
             "edge_skip_mm",
             "rim_band_mm",
+            "faint_factor",
         )
         for name in non_negative:
             value = getattr(self, name)
@@ -266,7 +276,14 @@ class PlateParams:
             value = getattr(self, name)
             if value is not None and not math.isfinite(value):
                 raise ValueError(f"PlateParams.{name} must be a finite number, got {value!r}")
-        positive = ("dish_diameter_mm", "px_per_mm", "background_cell_mm", "max_colony_diameter_mm")
+        positive = (
+            "dish_diameter_mm",
+            "px_per_mm",
+            "background_cell_mm",
+            "max_colony_diameter_mm",
+            "faint_min_diameter_mm",
+            "faint_max_diameter_mm",
+        )
         for name in positive:
             value = getattr(self, name)
             if value is not None and not (value > 0 and math.isfinite(value)):
@@ -274,6 +291,10 @@ class PlateParams:
         if self.min_colony_diameter_mm > self.max_colony_diameter_mm:
             raise ValueError(
                 "PlateParams.min_colony_diameter_mm must not exceed max_colony_diameter_mm"
+            )
+        if self.faint_min_diameter_mm > self.faint_max_diameter_mm:
+            raise ValueError(
+                "PlateParams.faint_min_diameter_mm must not exceed faint_max_diameter_mm"
             )
         lo_area, hi_area = self.min_colony_area_px, self.max_colony_area_px
         if lo_area is not None and hi_area is not None and lo_area > hi_area:
@@ -967,6 +988,18 @@ def _objects_by_segmentation(
     dev = deviation(roi, background, params.channel_weights)
     t = adaptive_threshold(dev, usable, params.color_threshold, params.noise_factor)
     fg = hysteresis(dev, usable, t, params.low_ratio * t)
+    if params.faint_factor > 0:
+        faint = faint_bodies(
+            roi,
+            usable,
+            fg,
+            float(params.px_per_mm or 1.0),
+            factor=params.faint_factor,
+            min_diameter_mm=params.faint_min_diameter_mm,
+            max_diameter_mm=params.faint_max_diameter_mm,
+            margin_mm=params.rim_band_mm,
+        )
+        fg = cv2.bitwise_or(fg, faint)
     if params.open_mm > 0:
         # lines thinner than open_mm (the lid's and the wall's edges, scratches, hairs) go, so
         # colonies touching them come apart from them
