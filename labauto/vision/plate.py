@@ -230,7 +230,7 @@ class PlateParams:
     max_colony_diameter_mm: float = 27.0
     min_colony_area_px: float | None = None
     max_colony_area_px: float | None = None
-    min_width_mm: float = 0.4
+    min_width_mm: float = 0.15
     min_width_px: float | None = None
     max_elongation: float = 3.5
     max_fill_ratio: float = 5.0

@@ -80,9 +80,9 @@ def test_working_copy_maps_pixel_centres_both_ways() -> None:
 
 
 @pytest.mark.parametrize(("diameter_mm", "params"), [
-    (0.9, PlateParams()),  # the default floor: mean width 0.4 mm, i.e. discs from 0.8 mm
-    # smaller colonies on a clean plate, by config (mean-width floor and line opening lowered)
-    (0.45, PlateParams(min_width_mm=0.2, open_mm=0.3)),
+    (0.9, PlateParams()),  # above the default line opening (0.75 mm)
+    # smaller colonies on a clean plate, by config (line opening lowered)
+    (0.45, PlateParams(open_mm=0.3)),
 ])  # fmt: skip
 def test_small_colonies_on_a_photo_survive_the_resampling(
     diameter_mm: float, params: PlateParams
