@@ -88,13 +88,15 @@ def faint_bodies(
     empty = np.zeros((h, w), np.uint8)
     step = max(1, round(px_per_mm / _WORK_PX_PER_MM))
     ppm = px_per_mm / step
-    small_size = (max(w // step, 1), max(h // step, 1))
-    img = cv2.resize(image, small_size, interpolation=cv2.INTER_AREA) if step > 1 else image
-    agar = cv2.resize(usable, small_size, interpolation=cv2.INTER_NEAREST)
-    fine = cv2.resize(foreground, small_size, interpolation=cv2.INTER_NEAREST)
+    # whole blocks of step x step pixels (OpenCV's integer-factor path: ~10x faster); a last
+    # partial row or column is left out
+    sw, sh = max(w // step, 1), max(h // step, 1)
+    whole = (slice(0, sh * step), slice(0, sw * step))
+    img = cv2.resize(image[whole], (sw, sh), interpolation=cv2.INTER_AREA)
+    agar = cv2.resize(usable[whole], (sw, sh), interpolation=cv2.INTER_NEAREST)
+    fine = cv2.resize(foreground[whole], (sw, sh), interpolation=cv2.INTER_NEAREST)
 
     cell = max(round(_CELL_MM * ppm), 1)
-    sh, sw = img.shape[:2]
     cells = cv2.resize(img, (max(sw // cell, 1), max(sh // cell, 1)), interpolation=cv2.INTER_AREA)
     window = min(_MEDIAN_CELLS, 2 * ((min(cells.shape[:2]) - 1) // 2) + 1)
     median = cv2.medianBlur(cells, window) if window > 1 else cells
@@ -103,8 +105,10 @@ def faint_bodies(
     norm = cv2.sqrt(cv2.transform(cv2.multiply(diff, diff), np.ones((1, 3), np.float32)))
 
     edge = _gradient_norm(diff)
-    band = 2 * int(margin_mm * ppm) + 1
-    inner = cv2.erode(agar, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (band, band)))
+    # the agar farther than margin_mm from its border (a distance transform: a wide erosion's
+    # work in one pass)
+    depth = cv2.distanceTransform(agar, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    inner = cv2.compare(depth, margin_mm * ppm, cv2.CMP_GT)
     samples = norm[inner > 0]
     if samples.size == 0:
         return empty
@@ -140,10 +144,9 @@ def faint_bodies(
         return empty
     small_mask = np.zeros_like(faint)
     cv2.drawContours(small_mask, kept, -1, 255, cv2.FILLED)
-    if step == 1:
-        return small_mask
-    mask = cv2.resize(small_mask, (w, h), interpolation=cv2.INTER_LINEAR)
-    return cv2.compare(mask, 127, cv2.CMP_GT)
+    mask = cv2.resize(small_mask, (sw * step, sh * step), interpolation=cv2.INTER_LINEAR)
+    empty[whole] = cv2.compare(mask, 127, cv2.CMP_GT)
+    return empty
 
 
 def _gradient_norm(image: np.ndarray) -> np.ndarray:
