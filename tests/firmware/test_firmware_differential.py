@@ -103,7 +103,8 @@ SCRIPT: list[tuple[str, bytes, dict[str, float]]] = [
     ("reset during the dwell: the dwell is answered ok", b"\x18", {"at_least": 0.8}),
     ("unlock when not locked", b"$X\n", {}),
     ("soft limit", b"G53 G1 X1 F1000\n", {"quiet": 0.1}),
-    ("reset inside the alarm delay is lost", b"\x18", {"at_least": 0.9}),
+    # the message comes when the alarm delay is over: up to ~2x later when the machine is loaded
+    ("reset inside the alarm delay is lost", b"\x18", {"at_least": 2.5}),
     ("status is not answered when locked", b"?", {"quiet": 0.4}),
     ("reset: the stopped line is answered ok", b"\x18", {"at_least": 0.6}),
     ("unlock after the soft limit", b"$X\n", {}),
