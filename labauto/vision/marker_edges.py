@@ -80,7 +80,8 @@ def refine_circles(
     bits: list[np.ndarray],
     bit0: list[float],
     min_contrast: float,
-    passes: int = 2,
+    max_passes: int = 6,
+    tol_px: float = 0.005,
 ) -> list[Circles]:
     """Fits of the centre circle and the code ring's inner and outer edges of every marker.
 
@@ -96,9 +97,13 @@ def refine_circles(
         Direction (rad, rectified frame) where read bit 0 starts.
     min_contrast : float
         Least ink-paper difference of the markers (grey levels).
-    passes : int
-        Measurements; each pass after the first centres the windows on the previous fits, so
-        that a window's ends stay symmetric about its edge (its truncation cancels).
+    max_passes, tol_px : int, float
+        Each pass after the first measures along rays laid out from the previous fits, so that
+        every window is centred on its edge (its truncation cancels) and, under strong
+        perspective, the ring's rays follow the ring's own ellipse rather than the scaled centre
+        circle. A marker is measured again until no circle's centre moves more than ``tol_px``
+        (two passes for a small marker, up to four or five for one seen with strong
+        perspective), at most ``max_passes`` times.
 
     Returns
     -------
@@ -122,16 +127,29 @@ def refine_circles(
     reach = np.hypot(*np.einsum("kij,kj->ki", centre_maps[owner], unit).T)
     half = np.minimum(WINDOW_PX, 0.45 * reach)
     result: list[Circles] = [(None, None, None)] * len(ellipses)
-    for _ in range(passes):
+    active = np.ones(len(ellipses), bool)
+    for _ in range(max_passes):
         frames = [g[w] for g in guess for w in range(3)]
         centres, maps = affine_frames(frames)
-        index = owner * 3 + which
-        edge, usable = _measure(grey, centres[index], maps[index], unit, half, min_contrast)
-        result = _fit_sets(guess, edge, owner, which, usable)
-        guess = [
-            tuple(f if f is not None else g for f, g in zip(fit, old, strict=True))
-            for fit, old in zip(result, guess, strict=True)
-        ]
+        live = active[owner]
+        index = (owner * 3 + which)[live]
+        edge, usable = _measure(
+            grey, centres[index], maps[index], unit[live], half[live], min_contrast
+        )
+        fits = _fit_sets(guess, edge, owner[live], which[live], usable)
+        for m in np.flatnonzero(active).tolist():
+            moved = [
+                np.hypot(new.center[0] - old.center[0], new.center[1] - old.center[1])
+                for new, old in zip(fits[m], guess[m], strict=True)
+                if new is not None
+            ]
+            result[m] = fits[m]
+            guess[m] = tuple(
+                f if f is not None else g for f, g in zip(fits[m], guess[m], strict=True)
+            )
+            active[m] = bool(moved) and max(moved) > tol_px
+        if not active.any():
+            break
     return result
 
 
