@@ -123,8 +123,13 @@ def refine_circles(
     which = np.concatenate([r[1] for r in rays])
     _, centre_maps = affine_frames(ellipses)
     unit = np.column_stack((np.cos(theta), np.sin(theta)))
+    # every ray keeps its image direction (from the first fit's frame, where the sectors were
+    # read) through all passes; only its start (the circle's centre) and its expected crossing
+    # follow the fits. (A frame's rotation is arbitrary for a near-circle: re-deriving the
+    # directions from each new fit could turn the ring's rays onto the sector ends.)
+    direction = np.einsum("kij,kj->ki", centre_maps[owner], unit)
+    reach = np.hypot(direction[:, 0], direction[:, 1])
     # the window stays clear of the neighbouring circle (one centre radius away)
-    reach = np.hypot(*np.einsum("kij,kj->ki", centre_maps[owner], unit).T)
     half = np.minimum(WINDOW_PX, 0.45 * reach)
     result: list[Circles] = [(None, None, None)] * len(ellipses)
     active = np.ones(len(ellipses), bool)
@@ -134,7 +139,7 @@ def refine_circles(
         live = active[owner]
         index = (owner * 3 + which)[live]
         edge, usable = _measure(
-            grey, centres[index], maps[index], unit[live], half[live], min_contrast
+            grey, centres[index], maps[index], direction[live], half[live], min_contrast
         )
         fits = _fit_sets(guess, edge, owner[live], which[live], usable)
         for m in np.flatnonzero(active).tolist():
@@ -157,17 +162,21 @@ def _measure(
     grey: np.ndarray,
     centres: np.ndarray,
     maps: np.ndarray,
-    unit: np.ndarray,
+    direction: np.ndarray,
     half: np.ndarray,
     min_contrast: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Edge point along every ray ``centre + rho * map @ unit`` near ``rho = 1``, and its use."""
+    """Edge point along every ray ``centre + s * direction`` near the ellipse ``(centre, map)``,
+    and whether it is usable."""
     n_samples = round(2 * WINDOW_PX / STEP_PX)
     grid = ((np.arange(n_samples) + 0.5) / n_samples * 2.0 - 1.0).astype(np.float32)
-    direction = maps[:, :, 0] * unit[:, :1] + maps[:, :, 1] * unit[:, 1:]  # px per frame unit
+    # expected crossing: |map^-1 (s0 direction)| = 1
+    local = np.linalg.solve(maps, direction[:, :, None])[:, :, 0]
+    s0 = 1.0 / np.hypot(local[:, 0], local[:, 1])
     px_per_unit = np.hypot(direction[:, 0], direction[:, 1])
-    # sample j of a ray is at centre + direction * (1 + grid_j * half / px_per_unit)
-    along = (half / px_per_unit).astype(np.float32)[:, None] * grid[None, :] + np.float32(1.0)
+    along = (half / px_per_unit).astype(np.float32)[:, None] * grid[None, :] + s0.astype(
+        np.float32
+    )[:, None]
     mx = centres[:, :1].astype(np.float32) + direction[:, :1].astype(np.float32) * along
     my = centres[:, 1:].astype(np.float32) + direction[:, 1:].astype(np.float32) * along
     prof = cv2.remap(grey, mx, my, cv2.INTER_LINEAR, cv2.BORDER_REPLICATE)
@@ -179,7 +188,7 @@ def _measure(
     ones = n_samples - (total - n_samples * start) / np.where(usable, step, 1.0)
     edge_px = -half + ones * (2.0 * half / n_samples)
     usable &= np.abs(edge_px) < half
-    edge = centres + (1.0 + edge_px / px_per_unit)[:, None] * direction
+    edge = centres + (s0 + edge_px / px_per_unit)[:, None] * direction
     return edge, usable
 
 
