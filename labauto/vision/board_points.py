@@ -114,6 +114,9 @@ def _des_ellipses(grey: np.ndarray) -> list[Ellipse]:
 
 def _grid_centres(grey: np.ndarray, board: GridBoard) -> np.ndarray:
     ellipses = [e for e in _des_ellipses(grey) if e.axes[1] >= 2.0]
+    if ellipses:  # the grid's circles are alike; the page itself (a quadrilateral) is a DES too
+        typical = float(np.median([e.axes[0] for e in ellipses]))
+        ellipses = [e for e in ellipses if typical / 3 < e.axes[0] < typical * 3]
     if board.type == "circle-grid":
         return np.array([e.center for e in ellipses], np.float64).reshape(-1, 2)
     ratio = board.inner_diameter_mm / board.diameter_mm

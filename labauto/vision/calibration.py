@@ -242,8 +242,13 @@ def _bias_in_image(
 def _need(usable: list, views: Sequence[ViewPoints], reasons: dict, min_views: int) -> None:
     if len(usable) >= min_views:
         return
-    why = Counter(reasons.values())
-    detail = "; ".join(f"{n} x {r}" for r, n in why.most_common(3)) or "no views given"
+    ok = {id(v) for v in usable}
+    why = Counter(reasons.get(v.name, "unknown") for v in views if id(v) not in ok)
+    detail = "; ".join(f"{n} x {r}" for r, n in why.most_common(3))
+    if not views:
+        detail = "no views given"
+    elif not detail:
+        detail = f"every view showed the board; give at least {min_views} views"
     raise CalibrationFailed(
         f"too few usable views: {len(usable)} of {len(views)} (needs {min_views}): {detail}"
     )
