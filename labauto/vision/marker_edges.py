@@ -29,6 +29,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from labauto.vision.concentric import projected_center
 from labauto.vision.ellipse import Ellipse
 from labauto.vision.ellipse_fit import fit_ellipses_geometric_batch
 from labauto.vision.marker_codes import N_BITS, RING_INNER, RING_OUTER
@@ -81,7 +82,7 @@ def refine_circles(
     bit0: list[float],
     min_contrast: float,
     max_passes: int = 6,
-    tol_px: float = 0.005,
+    tol_px: float = 0.01,
 ) -> list[Circles]:
     """Fits of the centre circle and the code ring's inner and outer edges of every marker.
 
@@ -101,9 +102,9 @@ def refine_circles(
         Each pass after the first measures along rays laid out from the previous fits, so that
         every window is centred on its edge (its truncation cancels) and, under strong
         perspective, the ring's rays follow the ring's own ellipse rather than the scaled centre
-        circle. A marker is measured again until no circle's centre moves more than ``tol_px``
-        (two passes for a small marker, up to four or five for one seen with strong
-        perspective), at most ``max_passes`` times.
+        circle. A marker is measured again until its centre (:func:`marker_center`) moves less
+        than ``tol_px`` (three passes for a small marker, up to five or six for one seen with
+        strong perspective), at most ``max_passes`` times.
 
     Returns
     -------
@@ -143,19 +144,28 @@ def refine_circles(
         )
         fits = _fit_sets(guess, edge, owner[live], which[live], usable)
         for m in np.flatnonzero(active).tolist():
-            moved = [
-                np.hypot(new.center[0] - old.center[0], new.center[1] - old.center[1])
-                for new, old in zip(fits[m], guess[m], strict=True)
-                if new is not None
-            ]
+            centre = marker_center(fits[m])
+            before = marker_center(result[m])
             result[m] = fits[m]
             guess[m] = tuple(
                 f if f is not None else g for f, g in zip(fits[m], guess[m], strict=True)
             )
-            active[m] = bool(moved) and max(moved) > tol_px
+            active[m] = centre is not None and (
+                before is None or np.hypot(centre[0] - before[0], centre[1] - before[1]) > tol_px
+            )
         if not active.any():
             break
     return result
+
+
+def marker_center(circles: Circles) -> tuple[float, float] | None:
+    """The projected centre from the fits: the centre circle with the outer ring edge (radius
+    ratio 3, the best-conditioned pair), or with the inner edge when the outer one failed."""
+    centre, inner, outer = circles
+    ring = outer if outer is not None else inner
+    if centre is None or ring is None:
+        return None
+    return projected_center([centre, ring])
 
 
 def _measure(
