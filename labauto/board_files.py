@@ -191,26 +191,17 @@ def _pdf(board: Board) -> bytes:
 
 def render_board(board: Board, px_per_mm: float) -> np.ndarray:
     """The board as a grey uint8 image, ``px_per_mm`` pixels per millimetre."""
-    from labauto.synthetic.markers import draw_disc, draw_marker, draw_ring, finish
+    from labauto.synthetic.board_views import draw_board
+    from labauto.synthetic.markers import finish
 
     width, height = _page(board)
-    ink, paper = (0.0, 255.0) if board.polarity == "dark-on-light" else (255.0, 0.0)
+    paper = 255.0 if board.polarity == "dark-on-light" else 0.0
     img = np.full((math.ceil(height * px_per_mm), math.ceil(width * px_per_mm)), paper)
 
     def to_image(points: np.ndarray) -> np.ndarray:
         return np.asarray(points, np.float64) * px_per_mm - 0.5
 
-    if isinstance(board, CodedBoard):
-        for marker_id, centre in zip(board.ids.tolist(), board.centers_mm.tolist(), strict=True):
-            draw_marker(img, marker_id, centre, board.marker_radius_mm, to_image=to_image, ink=ink)
-    else:
-        for x, y, _ in board.object_points().tolist():
-            centre = (x + board.spacing_mm, y + board.spacing_mm)
-            if board.type == "circle-grid":
-                draw_disc(img, centre, board.diameter_mm / 2, to_image=to_image, color=ink)
-            else:
-                r_in, r_out = board.inner_diameter_mm / 2, board.diameter_mm / 2
-                draw_ring(img, centre, r_in, r_out, to_image=to_image, color=ink)
+    draw_board(img, board, to_image, paper=255.0, ink=0.0, page=False)
     return finish(img)
 
 

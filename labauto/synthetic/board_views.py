@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from labauto.synthetic.markers import (
+    PlaneToImage,
     camera_map,
     draw_disc,
     draw_marker,
@@ -90,6 +91,52 @@ def board_poses(
     return poses
 
 
+def draw_board(
+    img: np.ndarray,
+    board: Board,
+    to_image: PlaneToImage,
+    *,
+    paper: float = 215.0,
+    ink: float = 25.0,
+    page: bool = True,
+) -> np.ndarray:
+    """Draw the board's page (``page``) and its markers, circles or rings into a float image.
+
+    ``to_image`` maps the page's plane (mm from its top-left corner, y down) to pixels.
+    ``light-on-dark`` boards swap ``paper`` and ``ink``. Returns the (n, 2) true image
+    positions of the board points, in :meth:`object_points` order.
+    """
+    w_mm, h_mm = board_extent(board)
+    if board.polarity == "light-on-dark":
+        paper, ink = ink, paper
+    if page:
+        edge = np.linspace(0, 1, 200, endpoint=False)
+        outline = np.concatenate(
+            [
+                np.column_stack((edge * w_mm, np.zeros_like(edge))),
+                np.column_stack((np.full_like(edge, w_mm), edge * h_mm)),
+                np.column_stack(((1 - edge) * w_mm, np.full_like(edge, h_mm))),
+                np.column_stack((np.zeros_like(edge), (1 - edge) * h_mm)),
+            ]
+        )
+        fill_polygons(img, [to_image(outline)], paper)
+    truth = []
+    if isinstance(board, CodedBoard):
+        for marker_id, centre in zip(board.ids.tolist(), board.centers_mm.tolist(), strict=True):
+            r = board.marker_radius_mm
+            truth.append(draw_marker(img, marker_id, centre, r, to_image=to_image, ink=ink))
+        return np.array(truth)
+    for x, y, _ in board_points(board).tolist():
+        if board.type == "circle-grid":
+            truth.append(
+                draw_disc(img, (x, y), board.diameter_mm / 2, to_image=to_image, color=ink)
+            )
+        else:
+            r_in, r_out = board.inner_diameter_mm / 2, board.diameter_mm / 2
+            truth.append(draw_ring(img, (x, y), r_in, r_out, to_image=to_image, color=ink))
+    return np.array(truth)
+
+
 def render_board_view(
     board: Board,
     camera_matrix: np.ndarray,
@@ -112,56 +159,12 @@ def render_board_view(
     each point (distortion included).
     """
     to_image = camera_map(camera_matrix, dist_coeffs, rvec, tvec)
-    w_mm, h_mm = board_extent(board)
     width, height = image_size
-    light_on_dark = board.polarity == "light-on-dark"
-    page_colour, ink_colour = (ink, paper) if light_on_dark else (paper, ink)
     img = np.full((height, width), float(table))
-    edge = np.linspace(0, 1, 200, endpoint=False)
-    outline = np.concatenate(
-        [
-            np.column_stack((edge * w_mm, np.zeros_like(edge))),
-            np.column_stack((np.full_like(edge, w_mm), edge * h_mm)),
-            np.column_stack(((1 - edge) * w_mm, np.full_like(edge, h_mm))),
-            np.column_stack((np.zeros_like(edge), (1 - edge) * h_mm)),
-        ]
-    )
-    fill_polygons(img, [to_image(outline)], page_colour)
-    truth = []
-    if isinstance(board, CodedBoard):
-        for marker_id, centre in zip(board.ids.tolist(), board.centers_mm.tolist(), strict=True):
-            truth.append(
-                draw_marker(
-                    img,
-                    marker_id,
-                    centre,
-                    board.marker_radius_mm,
-                    to_image=to_image,
-                    ink=ink_colour,
-                )
-            )
-    else:
-        for x, y, _ in board_points(board).tolist():
-            if board.type == "circle-grid":
-                truth.append(
-                    draw_disc(
-                        img, (x, y), board.diameter_mm / 2, to_image=to_image, color=ink_colour
-                    )
-                )
-            else:
-                truth.append(
-                    draw_ring(
-                        img,
-                        (x, y),
-                        board.inner_diameter_mm / 2,
-                        board.diameter_mm / 2,
-                        to_image=to_image,
-                        color=ink_colour,
-                    )
-                )
+    truth = draw_board(img, board, to_image, paper=paper, ink=ink)
     if light_gain != (1.0, 1.0):
         yy, xx = np.mgrid[0:height, 0:width]
         r = np.hypot(xx - width * 0.3, yy - height * 0.4) / np.hypot(width, height)
         img *= light_gain[1] - (light_gain[1] - light_gain[0]) * np.clip(r / 0.8, 0, 1)
     rng = rng if rng is not None else np.random.default_rng(0)
-    return finish(img, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng), np.array(truth)
+    return finish(img, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng), truth
