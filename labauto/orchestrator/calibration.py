@@ -114,3 +114,30 @@ def _collinear(points: np.ndarray) -> bool:
 
 def _apply(homography: np.ndarray, points: np.ndarray) -> np.ndarray:
     return cv2.perspectiveTransform(points.reshape(-1, 1, 2), homography).reshape(-1, 2)
+
+
+def stored_deck_calibration(config, store):
+    """The stored deck calibration a run uses, or None (then the homography of the config).
+
+    ``calibration.use_stored`` on and a stored ``deck`` calibration named
+    ``calibration.deck.name``: it is used if its residual is within
+    ``calibration.max_residual_mm``, else refused.
+    """
+    if not config.calibration.use_stored:
+        return None
+    from labauto.store.calibrations import load_calibration
+    from labauto.vision.deck import DeckCalibration
+
+    name = config.calibration.deck.name
+    stored = load_calibration(store.engine, name, "deck")
+    if stored is None:
+        return None
+    deck = DeckCalibration.from_dict(stored.data)
+    limit = config.calibration.max_residual_mm
+    if deck.residual_mm > limit:
+        raise CalibrationError(
+            f"stored deck calibration {name!r} (id {stored.id}) has a residual of "
+            f"{deck.residual_mm:.3f} mm, over the limit of {limit:.3f} mm: calibrate the deck "
+            "again (labauto calibrate deck) or set calibration.use_stored: false"
+        )
+    return deck
