@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from labauto.errors import CalibrationError
+from labauto.vision.deck import residual_check
 
 
 @dataclass(frozen=True)
@@ -78,13 +79,9 @@ class Calibration:
         if homography is None or not np.all(np.isfinite(homography)):
             raise CalibrationError("calibration points are degenerate (collinear or repeated)")
         errors = np.linalg.norm(_apply(homography, src) - dst, axis=1)
-        residual = float(np.sqrt(np.mean(errors**2)))
-        if residual > max_residual_mm:
-            worst = int(np.argmax(errors))
-            raise CalibrationError(
-                f"calibration residual {residual:.3f} mm exceeds the limit of "
-                f"{max_residual_mm:.3f} mm (worst: point {worst}, {errors[worst]:.3f} mm off)"
-            )
+        residual, problem = residual_check(errors, max_residual_mm, "calibration")
+        if problem:
+            raise CalibrationError(problem)
         return cls(homography, residual, float(errors.max()), len(src))
 
     def to_deck(self, pixels: np.ndarray) -> np.ndarray:

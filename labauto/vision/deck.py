@@ -50,6 +50,18 @@ def board_to_deck(points: np.ndarray, origin_mm: tuple, angle_deg: float = 0.0) 
     return out
 
 
+def residual_check(errors: np.ndarray, limit_mm: float, what: str) -> tuple[float, str | None]:
+    """RMS of point errors (mm) and, when it exceeds ``limit_mm``, the message refusing it."""
+    residual = float(np.sqrt(np.mean(np.square(errors))))
+    if residual <= limit_mm:
+        return residual, None
+    worst = int(np.argmax(errors))
+    return residual, (
+        f"{what} residual {residual:.3f} mm exceeds the limit of {limit_mm:.3f} mm "
+        f"(worst: point {worst}, {errors[worst]:.3f} mm off)"
+    )
+
+
 def undistort_points(
     pixels: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.ndarray, iterations: int = 20
 ) -> np.ndarray:
@@ -141,13 +153,9 @@ class DeckCalibration:
         cal = cls(k, d, rvec.ravel(), tvec.ravel(), float(surface_z), 0.0, 0.0, len(px),
                   (int(image_size[0]), int(image_size[1])))  # fmt: skip
         errors = np.hypot(*(cal.to_deck(px, deck[:, 2]) - deck[:, :2]).T)
-        residual = float(np.sqrt(np.mean(errors**2)))
-        if residual > max_residual_mm:
-            worst = int(np.argmax(errors))
-            raise DeckCalibrationFailed(
-                f"deck calibration residual {residual:.3f} mm exceeds the limit of "
-                f"{max_residual_mm:.3f} mm (worst: point {worst}, {errors[worst]:.3f} mm off)"
-            )
+        residual, problem = residual_check(errors, max_residual_mm, "deck calibration")
+        if problem:
+            raise DeckCalibrationFailed(problem)
         return cls(k, d, cal.rvec, cal.tvec, float(surface_z), residual, float(errors.max()),
                    len(px), cal.image_size)  # fmt: skip
 
