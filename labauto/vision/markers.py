@@ -59,7 +59,7 @@ from labauto.vision.ellipse import Ellipse
 from labauto.vision.ellipse_fit import fit_selected_ellipses
 from labauto.vision.gradient import as_uint8_image
 from labauto.vision.marker_codes import N_BITS, RING_OUTER, decode_words
-from labauto.vision.marker_edges import affine_frames, marker_center, refine_circles
+from labauto.vision.marker_edges import affine_frames, marker_centers, refine_circles
 from labauto.vision.shape_angle import shape_angles
 
 #: Samples per sector along the ring, and the ring radii sampled (centre radii).
@@ -349,9 +349,12 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
         else [(None, None, None)] * len(picked)
     )
     out = []
-    for (marker_id, j), (centre_fit, inner, outer) in zip(chosen, circles, strict=True):
+    centres = marker_centers(circles)
+    for (marker_id, j), (centre_fit, inner, outer), xy in zip(
+        chosen, circles, centres, strict=True
+    ):
         e = centre_fit if centre_fit is not None else ellipses[j]
-        centre = marker_center((centre_fit, inner, outer))
+        centre = (float(xy[0]), float(xy[1])) if np.isfinite(xy).all() else None
         if (
             centre is not None
             and np.hypot(centre[0] - e.center[0], centre[1] - e.center[1])
