@@ -42,7 +42,7 @@ WINDOW_PX = 3.0
 STEP_PX = 0.2
 #: A ray is used when the ends of its profile differ by at least this share of the contrast.
 MIN_STEP_SHARE = 0.5
-#: A pass whose edges lay this close (median, px) to its windows' centres is the last one.
+#: A pass whose edges lay this close (mean, px) to its windows' centres is the last one.
 CENTRED_PX = 0.08
 #: A circle's fit is used with at least this many points and at most this rms (px).
 MIN_POINTS = 12
@@ -226,17 +226,13 @@ def _measure(
 def _windows_centred(
     offset: np.ndarray, usable: np.ndarray, key: np.ndarray, n_markers: int
 ) -> np.ndarray:
-    """(K,) bool: every circle of the marker had its edges within ``CENTRED_PX`` (median) of
-    the windows' centres."""
-    worst = np.full(3 * n_markers, np.inf)
+    """(K,) bool: every circle of the marker had its edges within ``CENTRED_PX`` (mean
+    distance) of the windows' centres."""
     k = key[usable]
-    if k.size:
-        order = np.argsort(k, kind="stable")
-        k, off = k[order], np.abs(offset[usable][order])
-        starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
-        ends = np.r_[starts[1:], k.size]
-        worst[k[starts]] = [np.median(off[a:b]) for a, b in zip(starts, ends, strict=True)]
-    return (worst.reshape(n_markers, 3) <= CENTRED_PX).all(axis=1)
+    count = np.bincount(k, minlength=3 * n_markers)
+    total = np.bincount(k, np.abs(offset[usable]), minlength=3 * n_markers)
+    mean = np.where(count > 0, total / np.maximum(count, 1), np.inf)
+    return (mean.reshape(n_markers, 3) <= CENTRED_PX).all(axis=1)
 
 
 def _fit_sets(
