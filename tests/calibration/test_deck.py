@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import yaml
 
+from labauto.calibration.deck import calibrate_deck
 from labauto.config import parse_config
-from labauto.deck_calibration import calibrate_deck
 from labauto.errors import CalibrationError
 from labauto.orchestrator.calibration import Calibration, stored_deck_calibration
 from labauto.store import Store
@@ -144,7 +144,7 @@ def test_a_marker_out_of_view_is_reported(tmp_path) -> None:
 
 
 def test_board_source_through_the_config(tmp_path) -> None:
-    from labauto.board_files import write_board
+    from labauto.calibration.boards_io import write_board
 
     _, description = write_board(coded_board(4, 5, 16.0), tmp_path / "deckboard.svg")
     board = {"path": str(description), "origin_mm": [50.0, 100.0, -30.0], "angle_deg": 4.0}
