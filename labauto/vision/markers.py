@@ -61,7 +61,7 @@ from labauto.vision.gradient import as_uint8_image
 from labauto.vision.marker_codes import N_BITS, RING_OUTER, decode_words
 from labauto.vision.marker_codes import warm as warm_codes
 from labauto.vision.marker_edges import affine_frames, marker_centers, refine_circles
-from labauto.vision.shape_angle import shape_angles
+from labauto.vision.shape_angle import ShapeAngles, shape_angles
 
 #: Samples per sector along the ring, and the ring radii sampled (centre radii).
 SAMPLES_PER_BIT = 8
@@ -306,7 +306,11 @@ def _read_codes(
     return ids, score, bit0, best_bits, start
 
 
-def _candidates(grey: np.ndarray, contours: Contours, params: MarkerParams):
+def _candidates(
+    grey: np.ndarray, contours: Contours, params: MarkerParams
+) -> tuple[ShapeAngles, list[Ellipse | None], list[int]]:
+    """Shape angles of all contours, the first fits of the DES of a plausible size, and the
+    indices of the fits whose code ring lies inside the image."""
     angles = shape_angles(contours.points, contours.gradients, contours.offsets, contours.closed)
     des = angles.is_des(params.des_threshold_deg)
     # cheap size test before fitting: the DES's extent from its area
