@@ -51,14 +51,22 @@ MAX_RMS = 0.3
 
 def affine_frames(ellipses: list[Ellipse]) -> tuple[np.ndarray, np.ndarray]:
     """Centres (K, 2) and affine maps (K, 2, 2) taking the unit circle onto each ellipse."""
-    centres = np.array([e.center for e in ellipses], np.float64)
-    theta = np.deg2rad([e.angle for e in ellipses])
-    axes = np.array([e.axes for e in ellipses], np.float64)
+    return _row_frames(_rows(ellipses))
+
+
+def _rows(ellipses: list[Ellipse]) -> np.ndarray:
+    """(K, 5) rows ``(cx, cy, a, b, angle_deg)``."""
+    return np.array([(*e.center, *e.axes, e.angle) for e in ellipses], np.float64).reshape(-1, 5)
+
+
+def _row_frames(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centres and unit-circle maps of ellipse rows ``(cx, cy, a, b, angle_deg)``."""
+    theta = np.deg2rad(rows[:, 4])
     c, s = np.cos(theta), np.sin(theta)
-    maps = np.empty((len(ellipses), 2, 2))
-    maps[:, 0, 0], maps[:, 0, 1] = c * axes[:, 0], -s * axes[:, 1]
-    maps[:, 1, 0], maps[:, 1, 1] = s * axes[:, 0], c * axes[:, 1]
-    return centres, maps
+    maps = np.empty((len(rows), 2, 2))
+    maps[:, 0, 0], maps[:, 0, 1] = c * rows[:, 2], -s * rows[:, 3]
+    maps[:, 1, 0], maps[:, 1, 1] = s * rows[:, 2], c * rows[:, 3]
+    return rows[:, :2].copy(), maps
 
 
 def _rays(bits: np.ndarray, bit0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -128,13 +136,13 @@ def refine_circles(
     """
     if not ellipses:
         return []
-    scale = (1.0, RING_INNER, RING_OUTER)
-    guess = [
-        tuple(Ellipse(e.center, (e.axes[0] * f, e.axes[1] * f), e.angle) for f in scale)
-        for e in ellipses
-    ]
+    k = len(ellipses)
+    first = _rows(ellipses)
+    guess = np.repeat(first[:, None, :], 3, axis=1)  # (K, 3 circles, 5): the scaled centre circle
+    for w, f in ((1, RING_INNER), (2, RING_OUTER)):
+        guess[:, w, 2:4] *= f
     owner, theta, which = _rays(np.asarray(bits), np.asarray(bit0, np.float64))
-    _, centre_maps = affine_frames(ellipses)
+    _, centre_maps = _row_frames(first)
     unit = np.column_stack((np.cos(theta), np.sin(theta)))
     # every ray keeps its image direction (from the first fit's frame, where the sectors were
     # read) through all passes; only its start (the circle's centre) and its expected crossing
@@ -144,50 +152,57 @@ def refine_circles(
     reach = np.hypot(direction[:, 0], direction[:, 1])
     # the window stays clear of the neighbouring circle (one centre radius away)
     half = np.minimum(WINDOW_PX, 0.45 * reach)
-    result: list[Circles] = [(None, None, None)] * len(ellipses)
-    active = np.ones(len(ellipses), bool)
+    key = owner * 3 + which
+    result = np.full((k, 3, 5), np.nan)  # NaN rows: no fit
+    active = np.ones(k, bool)
     for _ in range(max_passes):
-        frames = [g[w] for g in guess for w in range(3)]
-        centres, maps = affine_frames(frames)
+        centres, maps = _row_frames(guess.reshape(-1, 5))
         live = active[owner]
-        index = (owner * 3 + which)[live]
         edge, usable, offset = _measure(
-            grey, centres[index], maps[index], direction[live], half[live], min_contrast
+            grey, centres[key[live]], maps[key[live]], direction[live], half[live], min_contrast
         )
-        fits = _fit_sets(guess, edge, owner[live], which[live], usable)
+        fits = _fit_sets(guess, edge, key[live], usable)
         todo = np.flatnonzero(active)
-        now = marker_centers([fits[m] for m in todo])
-        before = marker_centers([result[m] for m in todo])
+        now, before = _centres(fits[todo]), _centres(result[todo])
         moved = np.hypot(*(now - before).T)
-        centred = _windows_centred(offset, usable, owner[live] * 3 + which[live], len(guess))
-        for m, centre, shift in zip(todo.tolist(), now, moved, strict=True):
-            result[m] = fits[m]
-            guess[m] = tuple(
-                f if f is not None else g for f, g in zip(fits[m], guess[m], strict=True)
-            )
-            # done when the windows sat on their edges (another pass would measure the same)
-            # or the centre stopped moving; NaN: no centre yet, nothing more to gain
-            active[m] = bool(np.isfinite(centre).all()) and not centred[m] and not shift <= tol_px
+        centred = _windows_centred(offset, usable, key[live], k)[todo]
+        result[todo] = fits[todo]
+        got = np.isfinite(fits[:, :, 0]) & active[:, None]
+        guess[got] = fits[got]
+        # done when the windows sat on their edges (another pass would measure the same) or the
+        # centre stopped moving; no centre yet (NaN): nothing more to gain
+        active[todo] = np.isfinite(now).all(axis=1) & ~centred & ~(moved <= tol_px)
         if not active.any():
             break
-    return result
+    return [
+        tuple(
+            None if not np.isfinite(r[0]) else Ellipse((r[0], r[1]), (r[2], r[3]), r[4])
+            for r in circles.tolist()
+        )
+        for circles in result
+    ]  # type: ignore[misc]
+
+
+def _centres(rows: np.ndarray) -> np.ndarray:
+    """(K, 2) projected centres of (K, 3, 5) circle rows (see :func:`marker_centers`)."""
+    ring = np.where(np.isfinite(rows[:, 2, :1]), rows[:, 2], rows[:, 1])
+    out = np.full((len(rows), 2), np.nan)
+    have = np.isfinite(rows[:, 0, 0]) & np.isfinite(ring[:, 0])
+    if have.any():
+        out[have] = projected_centers(rows[have, 0], ring[have])
+    return out
 
 
 def marker_centers(circles: list[Circles]) -> np.ndarray:
     """(K, 2) projected centres from the fits (NaN where there is none): the centre circle
     with the outer ring edge (radius ratio 3, the best-conditioned pair), or with the inner
     edge when the outer one failed."""
-    rows = np.full((len(circles), 2, 5), np.nan)
-    for k, (centre, inner, outer) in enumerate(circles):
-        ring = outer if outer is not None else inner
-        if centre is not None and ring is not None:
-            rows[k, 0] = (*centre.center, *centre.axes, centre.angle)
-            rows[k, 1] = (*ring.center, *ring.axes, ring.angle)
-    out = np.full((len(circles), 2), np.nan)
-    have = np.isfinite(rows[:, 0, 0])
-    if have.any():
-        out[have] = projected_centers(rows[have, 0], rows[have, 1])
-    return out
+    rows = np.full((len(circles), 3, 5), np.nan)
+    for k, fits in enumerate(circles):
+        for w, e in enumerate(fits):
+            if e is not None:
+                rows[k, w] = (*e.center, *e.axes, e.angle)
+    return _centres(rows)
 
 
 def _measure(
@@ -246,26 +261,23 @@ def _windows_centred(
 
 
 def _fit_sets(
-    guess: list[tuple[Ellipse, Ellipse, Ellipse]],
-    edge: np.ndarray,
-    owner: np.ndarray,
-    which: np.ndarray,
-    usable: np.ndarray,
-) -> list[Circles]:
-    # rays come grouped by marker, then by circle: the sets are runs of the key
-    key = (owner * 3 + which)[usable]
-    counts = np.bincount(key, minlength=3 * len(guess))
+    guess: np.ndarray, edge: np.ndarray, key: np.ndarray, usable: np.ndarray
+) -> np.ndarray:
+    """(K, 3, 5) geometric fits of each circle's edge points (NaN: too few points or poor fit),
+    seeded by ``guess``; ``key`` is ``marker * 3 + circle`` of every ray (grouped by key)."""
+    out = np.full(guess.shape, np.nan)
+    k = key[usable]
+    counts = np.bincount(k, minlength=guess.shape[0] * 3)
     keys = np.flatnonzero(counts >= MIN_POINTS)
-    out: list[list[Ellipse | None]] = [[None, None, None] for _ in guess]
     if keys.size == 0:
-        return [tuple(o) for o in out]  # type: ignore[misc]
-    take = np.isin(key, keys)
-    points = edge[usable][take]
+        return out
+    points = edge[usable][np.isin(k, keys)]
     offsets = np.concatenate(([0], np.cumsum(counts[keys]))).astype(np.int64)
-    firsts = [guess[k // 3][k % 3] for k in keys.tolist()]
-    initial = np.array([(*e.center, *e.axes, e.angle) for e in firsts])
-    fits = fit_ellipses_geometric_batch(points, offsets, initial, max_iter=20, tol=1e-8)
-    for k, fit in zip(keys.tolist(), fits, strict=True):
+    flat = guess.reshape(-1, 5)
+    fits = fit_ellipses_geometric_batch(points, offsets, flat[keys], max_iter=20, tol=1e-8)
+    flat_out = out.reshape(-1, 5)
+    for j, fit in zip(keys.tolist(), fits, strict=True):
         if fit is not None and fit.rms <= MAX_RMS:
-            out[k // 3][k % 3] = fit.ellipse
-    return [tuple(o) for o in out]  # type: ignore[misc]
+            e = fit.ellipse
+            flat_out[j] = (*e.center, *e.axes, e.angle)
+    return out
