@@ -13,7 +13,7 @@ objects, we first segment obviously elliptical shapes from artifacts using our D
 4. **Code read** in the ellipse's rectified frame: the affine map taking the unit circle onto the
    fitted ellipse takes the marker's plane, to first order, onto the image (up to an unknown
    rotation, which the rotation-invariant code does not care about). The image is sampled
-   (bilinear) on circles of radii 2.3, 2.5, 2.7 (the code ring, 2-3 centre radii) at 8 samples
+   (bilinear) on circles of radii 2.35 and 2.65 (the code ring, 2-3 centre radii) at 8 samples
    per sector, on the centre circle (ink level) and on the paper gap and quiet zone (paper
    level). Samples are normalised to 0 (ink) .. 1 (paper), so dark-on-light and light-on-dark
    markers read alike and uneven light only matters through the local levels. The sector
@@ -65,7 +65,7 @@ from labauto.vision.shape_angle import ShapeAngles, shape_angles
 
 #: Samples per sector along the ring, and the ring radii sampled (centre radii).
 SAMPLES_PER_BIT = 8
-READ_RADII = (2.3, 2.5, 2.7)
+READ_RADII = (2.35, 2.65)
 #: Largest believable perspective bias: a corrected centre farther than this from the centre
 #: circle's ellipse centre (share of its semi-minor axis, plus px) is dropped (the bias of a
 #: 20 px marker at 60 degrees seen with strong perspective is 0.05 semi-minor axes).
