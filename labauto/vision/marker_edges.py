@@ -21,7 +21,11 @@ for more, so once a marker is read its three circles are measured again, along r
   the circle's size but not its centre;
 * each circle's points get the geometric ellipse fit (:func:`labauto.vision.ellipse_fit.
   fit_ellipses_geometric_batch`, one batch for all markers), and the projected centre comes from
-  the three conics (:func:`labauto.vision.concentric.projected_center`).
+  the centre circle's and the outer edge's conics (:func:`marker_centers`,
+  :func:`labauto.vision.concentric.projected_centers`);
+* the rays are laid out again from the new fits (same image directions, windows centred on the
+  new ellipses) until the windows sat on their edges or the centre stops moving: two passes for
+  most markers, up to six under strong perspective (:func:`refine_circles`).
 """
 
 from __future__ import annotations
@@ -125,9 +129,10 @@ def refine_circles(
         Each pass after the first measures along rays laid out from the previous fits, so that
         every window is centred on its edge (its truncation cancels) and, under strong
         perspective, the ring's rays follow the ring's own ellipse rather than the scaled centre
-        circle. A marker is measured again until its centre (:func:`marker_centers`) moves less
-        than ``tol_px`` (three passes for a small marker, up to five or six for one seen with
-        strong perspective), at most ``max_passes`` times.
+        circle. A marker is measured again until its edges lay within ``CENTRED_PX`` of the
+        windows' centres or its centre (:func:`marker_centers`) moves less than ``tol_px``
+        (two passes for most markers, up to five or six for one seen with strong
+        perspective), at most ``max_passes`` times.
 
     Returns
     -------
