@@ -40,7 +40,8 @@ from labauto.vision import detector, edges
 from labauto.vision.contours import Contours
 from labauto.vision.detector import DetectorParams
 from labauto.vision.detector import detect as vision_detect
-from labauto.vision.gradient import as_uint8_image, color_gradient
+from labauto.vision.gradient import color_gradient
+from labauto.vision.image import as_image
 from labauto.vision.shape_angle import shape_angles
 
 Detection = tuple[float, float, float | None, float | None]  # cx, cy, a, b
@@ -147,7 +148,7 @@ STAGES = (
 def stage_times(image: np.ndarray, params: DetectorParams) -> list[float]:
     """Seconds per stage of ``detect(image, params)`` (Canny method), same calls in order."""
     t = [time.perf_counter()]
-    img = as_uint8_image(image)
+    img = as_image(image)
     gx, gy = color_gradient(img, params.blur_sigma)
     t.append(time.perf_counter())
     edge_map = edges.canny_edges(gx, gy, params.canny_low, params.canny_high)
