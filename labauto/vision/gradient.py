@@ -11,12 +11,13 @@ is within a factor sqrt(3) of the eq. 2 magnitude; thresholds are given on this 
 
 Derivatives are the 3x3 Sobel operator after an optional Gaussian blur (``cv2.GaussianBlur`` on
 all channels), in integer arithmetic on 8-bit data, so the result is int16 and can go straight
-into ``cv2.Canny(dx, dy, ...)``. For a colour image the three channel gradients and the choice
-among them are one compiled pass (:mod:`labauto.vision.kernels.gradient`); each channel's
-derivatives equal ``cv2.spatialGradient``'s. The 3x3 blur (``blur_sigma`` below 0.75, the default
-0.7 included) is done in that same pass, bit for bit as ``cv2.GaussianBlur`` does it (see
-:func:`gaussian_3x3_tap`), without writing the blurred image to memory; larger blurs and grey
-images call OpenCV.
+into ``cv2.Canny(dx, dy, ...)``. The plain path (:func:`strongest_channel_gradient`) is
+``cv2.GaussianBlur``, ``cv2.spatialGradient`` per channel and the per-pixel choice in numpy.
+With the compiled kernel (:mod:`labauto.vision.kernels.gradient`) the three channel gradients
+and the choice among them are one pass with the same result; the 3x3 blur (``blur_sigma`` below
+0.75, the default 0.7 included) is done in that same pass, bit for bit as ``cv2.GaussianBlur``
+does it (see :func:`gaussian_3x3_tap`), without writing the blurred image to memory; larger
+blurs and grey images call OpenCV.
 """
 
 from __future__ import annotations
@@ -27,7 +28,6 @@ import cv2
 import numpy as np
 
 from labauto.vision import kernels
-from labauto.vision.kernels.gradient import max_channel_sobel
 
 
 def _blur_size(blur_sigma: float) -> int:
@@ -95,8 +95,9 @@ def color_gradient(image: np.ndarray, blur_sigma: float = 0.7) -> tuple[np.ndarr
     """
     if image.dtype != np.uint8 or image.ndim not in (2, 3):
         raise ValueError(f"color_gradient needs a uint8 HxW or HxWx3 image, got {image.dtype}")
-    if image.ndim == 2:
-        return cv2.spatialGradient(_blur(image, blur_sigma))
+    kernel = kernels.compiled("gradient")
+    if image.ndim == 2 or kernel is None:
+        return strongest_channel_gradient(_blur(image, blur_sigma))
     if blur_sigma <= 0:
         tap = 0  # no blur
     elif _blur_size(blur_sigma) == 3:
@@ -106,5 +107,35 @@ def color_gradient(image: np.ndarray, blur_sigma: float = 0.7) -> tuple[np.ndarr
     gx = np.empty(image.shape[:2], np.int16)
     gy = np.empty(image.shape[:2], np.int16)
     # one pass (blur, derivatives, choice of channel), rows in parallel
-    max_channel_sobel(np.ascontiguousarray(image), gx, gy, kernels.threads(), tap)
+    kernel.max_channel_sobel(np.ascontiguousarray(image), gx, gy, kernels.threads(), tap)
     return gx, gy
+
+
+def strongest_channel_gradient(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The 3x3 Sobel gradient of the channel with the largest ``|gx| + |gy|``, per pixel.
+
+    ``cv2.spatialGradient`` of each channel (the image mirrored at its border without repeating
+    the edge pixel), then per pixel the first channel of largest L1 norm. A grey image is its
+    own strongest channel.
+
+    Parameters
+    ----------
+    image : np.ndarray
+        uint8 HxW or HxWx3.
+
+    Returns
+    -------
+    gx, gy : np.ndarray
+        int16 HxW.
+    """
+    if image.ndim == 2:
+        return cv2.spatialGradient(image)
+    channels = [cv2.spatialGradient(np.ascontiguousarray(image[..., c])) for c in range(3)]
+    gx = np.stack([dx for dx, _ in channels])
+    gy = np.stack([dy for _, dy in channels])
+    strength = np.abs(gx.astype(np.int32)) + np.abs(gy.astype(np.int32))
+    best = np.argmax(strength, axis=0)[None]  # argmax keeps the first of equal maxima
+    return (
+        np.take_along_axis(gx, best, axis=0)[0],
+        np.take_along_axis(gy, best, axis=0)[0],
+    )
