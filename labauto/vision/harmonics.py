@@ -28,17 +28,17 @@ radius), which would hide a small deformation; the classifier therefore measures
 Implementation: the per-edge integrals are summed per contour in the same call as the descriptors
 (:func:`labauto.vision.descriptors.measure_contours`): written out in numpy in
 :mod:`labauto.vision.shape_plain`, and by the compiled shape kernel
-(:func:`labauto.vision.kernels.shape.measure_contours`) when it runs. The kernel folds the factor ``e^{in
-phi}`` into per-vertex powers: with ``w = e^{i theta}`` at the edge's ends, ``e^{in phi} int e^{inu}
-du = (w1^n - w0^n) / (in)``, so each vertex's powers serve both of its edges, and the ``r^-2`` terms
-are gathered per harmonic: ``sum_edges c (w1^n - w0^n)`` (``c``: an edge's coefficient ``1 / (2
-d^2)`` or ``e^{2i phi} / (4 d^2)``) for every ``n``, a few multiply-adds per edge and harmonic
-instead of three complex products. The kernel goes harmonic by harmonic, each a vectorised pass over
-all vertices and edges. (Summation order is a rounding matter only; where an edge's line passes
-close to the centre, ``1 / d^2`` is large and the ``r^-2`` coefficients of any summation order carry
-rounding of that size: ~1e-10 of the 0th for a line 0.004 px from the centre.)
-:func:`classify_shapes` labels all contours of an image in one call; the single-contour
-functions are a batch of one.
+(:func:`labauto.vision.kernels.shape.measure_contours`) when it runs. The kernel folds the factor
+``e^{in phi}`` into per-vertex powers: with ``w = e^{i theta}`` at the edge's ends, ``e^{in phi} int
+e^{inu} du = (w1^n - w0^n) / (in)``, so each vertex's powers serve both of its edges, and the
+``r^-2`` terms are gathered per harmonic: ``sum_edges c (w1^n - w0^n)`` (``c``: an edge's
+coefficient ``1 / (2 d^2)`` or ``e^{2i phi} / (4 d^2)``) for every ``n``, a few multiply-adds per
+edge and harmonic instead of three complex products. The kernel goes harmonic by harmonic, each a
+vectorised pass over all vertices and edges. (Summation order is a rounding matter only; where an
+edge's line passes close to the centre, ``1 / d^2`` is large and the ``r^-2`` coefficients of any
+summation order carry rounding of that size: ~1e-10 of the 0th for a line 0.004 px from the centre.)
+:func:`classify_shapes` labels all contours of an image in one call; the single-contour functions
+are a batch of one.
 """
 
 from __future__ import annotations

@@ -64,10 +64,14 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
     def chain(sequence: list) -> list:
         stack: list = []
         for p in sequence:
-            while len(stack) >= 2 and (
-                (stack[-1][0] - stack[-2][0]) * (p[1] - stack[-2][1])
-                - (stack[-1][1] - stack[-2][1]) * (p[0] - stack[-2][0])
-            ) <= 0.0:
+            while (
+                len(stack) >= 2
+                and (
+                    (stack[-1][0] - stack[-2][0]) * (p[1] - stack[-2][1])
+                    - (stack[-1][1] - stack[-2][1]) * (p[0] - stack[-2][0])
+                )
+                <= 0.0
+            ):
                 stack.pop()
             stack.append(p)
         return stack

@@ -9,8 +9,10 @@ of a user-visible time. Installing without a C compiler gives the plain path (se
 Backend
     ``"compiled"`` uses every kernel that is built; ``"plain"`` none. The default is
     ``"compiled"`` when the kernels are built, else ``"plain"``; ``LABAUTO_KERNELS=off`` (read
-    once, on import) chooses ``"plain"``, ``LABAUTO_KERNELS=on`` requires the kernels (an
-    ImportError names what is missing). :func:`use` switches at run time; :func:`backend`
+    once, when a kernel is first asked for) chooses ``"plain"``, ``LABAUTO_KERNELS=on``
+    requires the kernels (an ImportError names what is missing). The compiled modules (and
+    with them OpenMP) are loaded then too, not on import, so that a program can set
+    ``OMP_WAIT_POLICY`` and the like first. :func:`use` switches at run time; :func:`backend`
     says which runs. A vision module asks :func:`compiled` for its kernel at each call and runs
     its plain code when it gets None.
 Threads
@@ -24,6 +26,7 @@ Threads
 
 from __future__ import annotations
 
+import functools
 import importlib
 import os
 from types import ModuleType
@@ -34,8 +37,9 @@ KERNELS = ("edges", "ellipse_fit", "gradient", "shape")
 BACKENDS = ("compiled", "plain")
 
 
+@functools.cache
 def _load() -> dict[str, ModuleType]:
-    """The built kernels, by name (an empty dict when none is built)."""
+    """The built kernels, by name (an empty dict when none is built); loaded once."""
     found = {}
     for name in KERNELS:
         try:
@@ -45,20 +49,18 @@ def _load() -> dict[str, ModuleType]:
     return found
 
 
-_BUILT = _load()
-
-
 def built() -> tuple[str, ...]:
     """Names of the kernels that are built and importable."""
-    return tuple(_BUILT)
+    return tuple(_load())
 
 
 def _initial_backend(setting: str) -> str:
     setting = setting.strip().lower()
+    found = _load()
     if setting in ("off", "plain", "0", "no"):
         return "plain"
     if setting in ("on", "compiled", "1", "yes"):
-        missing = [name for name in KERNELS if name not in _BUILT]
+        missing = [name for name in KERNELS if name not in found]
         if missing:
             raise ImportError(
                 f"LABAUTO_KERNELS={setting} but these kernels are not built: "
@@ -67,29 +69,39 @@ def _initial_backend(setting: str) -> str:
         return "compiled"
     if setting not in ("", "auto"):
         raise ImportError(f"LABAUTO_KERNELS must be on, off or auto, got {setting!r}")
-    return "compiled" if _BUILT else "plain"
+    return "compiled" if found else "plain"
 
 
-_backend = _initial_backend(os.environ.get("LABAUTO_KERNELS", ""))
+_backend: str | None = None  # chosen when first asked for
 _threads = 1
 
 
 def backend() -> str:
     """The backend that runs: ``"compiled"`` or ``"plain"``."""
+    global _backend
+    if _backend is None:
+        _backend = _initial_backend(os.environ.get("LABAUTO_KERNELS", ""))
     return _backend
 
 
 def describe() -> str:
     """One line saying which backend runs, e.g. for ``labauto --version``."""
-    if _backend == "plain":
-        reason = "LABAUTO_KERNELS=off" if _BUILT else "no compiled kernels installed"
+    if backend() == "plain":
+        reason = "LABAUTO_KERNELS=off" if _load() else "no compiled kernels installed"
         return f"vision backend: plain numpy/OpenCV ({reason})"
-    from labauto.vision.kernels import _build
-
     return (
-        f"vision backend: compiled kernels ({', '.join(sorted(_BUILT))}; "
-        f"built with {' '.join(_build.COMPILE_ARGS)})"
+        f"vision backend: compiled kernels ({', '.join(built())}; "
+        f"built with {' '.join(build_flags())})"
     )
+
+
+def build_flags() -> tuple[str, ...]:
+    """The compiler flags the kernels were built with (setup.py records them), or ()."""
+    try:
+        from labauto.vision.kernels import _build
+    except ImportError:  # kernels compiled by hand (cythonize), not by setup.py
+        return ()
+    return tuple(_build.COMPILE_ARGS)
 
 
 def use(name: str) -> None:
@@ -103,16 +115,16 @@ def use(name: str) -> None:
     global _backend
     if name not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {name!r}")
-    if name == "compiled" and not _BUILT:
+    if name == "compiled" and not _load():
         raise ValueError("no compiled kernels are installed: only the plain backend runs")
     _backend = name
 
 
 def compiled(name: str) -> ModuleType | None:
     """The compiled kernel ``name`` if it is built and the compiled backend runs, else None."""
-    if _backend != "compiled":
+    if backend() != "compiled":
         return None
-    return _BUILT.get(name)
+    return _load().get(name)
 
 
 def threads() -> int:
