@@ -130,12 +130,13 @@ def strongest_channel_gradient(image: np.ndarray) -> tuple[np.ndarray, np.ndarra
     """
     if image.ndim == 2:
         return cv2.spatialGradient(image)
-    channels = [cv2.spatialGradient(np.ascontiguousarray(image[..., c])) for c in range(3)]
-    gx = np.stack([dx for dx, _ in channels])
-    gy = np.stack([dy for _, dy in channels])
-    strength = np.abs(gx.astype(np.int32)) + np.abs(gy.astype(np.int32))
-    best = np.argmax(strength, axis=0)[None]  # argmax keeps the first of equal maxima
-    return (
-        np.take_along_axis(gx, best, axis=0)[0],
-        np.take_along_axis(gy, best, axis=0)[0],
-    )
+    channels = cv2.split(image)
+    gx, gy = cv2.spatialGradient(channels[0])
+    strength = cv2.add(np.abs(gx), np.abs(gy))  # at most 2040: no overflow in int16
+    for channel in channels[1:]:
+        cx, cy = cv2.spatialGradient(channel)
+        norm = cv2.add(np.abs(cx), np.abs(cy))
+        stronger = cv2.compare(norm, strength, cv2.CMP_GT)  # ties keep the earlier channel
+        for chosen, candidate in ((gx, cx), (gy, cy), (strength, norm)):
+            cv2.copyTo(candidate, stronger, chosen)
+    return gx, gy

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import importlib.util
 import os
 from types import ModuleType
 
@@ -38,12 +39,28 @@ BACKENDS = ("compiled", "plain")
 
 
 @functools.cache
+def level() -> str:
+    """The build of the kernels this CPU runs: ``"v3"`` (x86-64-v3, AVX2) or ``"generic"``."""
+    try:
+        from labauto.vision.kernels import _cpu
+    except ImportError:
+        return "generic"
+    return (
+        "v3"
+        if _cpu.x86_64_v3() and importlib.util.find_spec(f"{__name__}.v3.gradient")
+        else ("generic")
+    )
+
+
+@functools.cache
 def _load() -> dict[str, ModuleType]:
-    """The built kernels, by name (an empty dict when none is built); loaded once."""
+    """The built kernels, by name (an empty dict when none is built); loaded once, from the
+    build for this CPU's vector level (:func:`level`)."""
+    package = f"{__name__}.v3" if level() == "v3" else __name__
     found = {}
     for name in KERNELS:
         try:
-            found[name] = importlib.import_module(f"{__name__}.{name}")
+            found[name] = importlib.import_module(f"{package}.{name}")
         except ImportError:
             continue
     return found
@@ -89,9 +106,10 @@ def describe() -> str:
     if backend() == "plain":
         reason = "LABAUTO_KERNELS=off" if _load() else "no compiled kernels installed"
         return f"vision backend: plain numpy/OpenCV ({reason})"
+    extra = " -march=x86-64-v3" if level() == "v3" else ""
     return (
         f"vision backend: compiled kernels ({', '.join(built())}; "
-        f"built with {' '.join(build_flags())})"
+        f"built with {' '.join(build_flags())}{extra})"
     )
 
 

@@ -265,51 +265,17 @@ cdef class Workspace:
 cdef extern from *:
     """
     #include <string.h>
-    #if defined(__x86_64__) || defined(__i386__) || defined(_M_X64)
-    #include <immintrin.h>
-    #define LABAUTO_X86 1
-    #endif
     static inline int labauto_ctz64(unsigned long long v) { return __builtin_ctzll(v); }
 
-    /* bit k set where p[k] != 0, k < 64 (one AVX-512 test, or 32- or 16-byte compares, or a
-       plain loop on CPUs other than x86) */
-    static inline unsigned long long labauto_nonzero64(const unsigned char* p) {
-    #if defined(__AVX512BW__)
-        const __m512i v = _mm512_loadu_si512((const void*)p);
-        return _mm512_test_epi8_mask(v, v);
-    #elif defined(__AVX2__)
-        const __m256i zero = _mm256_setzero_si256();
-        unsigned long long lo = (unsigned)_mm256_movemask_epi8(
-            _mm256_cmpeq_epi8(_mm256_loadu_si256((const __m256i*)p), zero));
-        unsigned long long hi = (unsigned)_mm256_movemask_epi8(
-            _mm256_cmpeq_epi8(_mm256_loadu_si256((const __m256i*)(p + 32)), zero));
-        return ~(lo | hi << 32);
-    #elif defined(LABAUTO_X86)
-        const __m128i zero = _mm_setzero_si128();
-        unsigned long long zeros = 0, bits;
-        for (int k = 0; k < 4; k++) {
-            bits = (unsigned)_mm_movemask_epi8(
-                _mm_cmpeq_epi8(_mm_loadu_si128((const __m128i*)(p + 16 * k)), zero));
-            zeros |= bits << (16 * k);
-        }
-        return ~zeros;
-    #else  /* other CPUs: the compiler vectorises this as it can */
-        unsigned long long found = 0;
-        for (int k = 0; k < 64; k++) found |= (unsigned long long)(p[k] != 0) << k;
-        return found;
-    #endif
-    }
-
-    /* the same for the last n < 64 pixels of a row */
+    /* bit k set where p[k] != 0, for the n <= 64 bytes p[0..n-1] (a plain loop the compiler
+       vectorises) */
     static inline unsigned long long labauto_nonzero_tail(const unsigned char* p, Py_ssize_t n) {
-    #if defined(__AVX512BW__)
-        const __m512i v = _mm512_maskz_loadu_epi8((1ULL << n) - 1, (const void*)p);
-        return _mm512_test_epi8_mask(v, v);
-    #else
         unsigned long long found = 0;
         for (Py_ssize_t k = 0; k < n; k++) found |= (unsigned long long)(p[k] != 0) << k;
         return found;
-    #endif
+    }
+    static inline unsigned long long labauto_nonzero64(const unsigned char* p) {
+        return labauto_nonzero_tail(p, 64);
     }
 
     /* four bytes from p (any alignment), byte k in bits 8k..8k+7 */
@@ -340,21 +306,9 @@ cdef extern from *:
     static inline void labauto_add_release(Py_ssize_t* p, Py_ssize_t v) {
         __atomic_fetch_add(p, v, __ATOMIC_RELEASE);
     }
-    #if defined(LABAUTO_X86)
-    static inline void labauto_pause(void) { _mm_pause(); }
-    #else
     static inline void labauto_pause(void) {}
-    #endif
-
-    /* a prefetch the optimiser keeps: a function whose only effect is __builtin_prefetch is
-       found side-effect free by GCC's interprocedural analysis and its calls are dropped */
-    static inline void labauto_prefetch(const void* p) {
-    #if defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
-        __asm__ __volatile__("prefetcht0 %0" : : "m"(*(const char*)p));
-    #else
-        __builtin_prefetch(p);
-    #endif
-    }
+    /* a macro, not a function: GCC drops calls of a function whose only effect is a prefetch */
+    #define labauto_prefetch(p) __builtin_prefetch(p)
     #if defined(_WIN32)
     static inline void labauto_yield(void) {}
     #else
