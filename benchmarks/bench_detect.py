@@ -35,6 +35,7 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
+from labauto.cli import process
 from labauto.synthetic.shapes import make_scene
 from labauto.vision import detector, edges
 from labauto.vision.contours import Contours
@@ -182,6 +183,7 @@ def main() -> None:
     parser.add_argument("--api", action="store_true", help="time labauto.detect if it exists")
     args = parser.parse_args()
     cv2.setNumThreads(args.threads)
+    process.configure()  # the kernels' threads and OpenMP's wait policy, as the CLI sets them
 
     name, detect = _detect_fn(args.api)
     rows: list[tuple[str, Callable[[np.ndarray], list[Detection]]]] = []

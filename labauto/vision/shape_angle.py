@@ -366,8 +366,10 @@ def deviation_angles(points: np.ndarray, gradients: np.ndarray, centre: np.ndarr
 def _medians(values: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """Median of each contour's values (mean of the two middle ones for an even count)."""
     n = np.diff(offsets)
-    contour = np.repeat(np.arange(n.shape[0]), n)
-    ordered = values[np.lexsort((values, contour))]
+    small = np.int16 if n.shape[0] < 2**15 else np.int64  # 16 bits: a radix sort below
+    contour = np.repeat(np.arange(n.shape[0], dtype=small), n)
+    by_value = np.argsort(values)
+    ordered = values[by_value[np.argsort(contour[by_value], kind="stable")]]
     low = offsets[:-1] + (n - 1) // 2
     high = offsets[:-1] + n // 2
     return 0.5 * (ordered[low] + ordered[high])
