@@ -12,9 +12,10 @@ a slow spell of a shared machine hits both alike:
 * ``shape_angle`` (plain only: its kernel was removed): D_alpha (eq. 3).
 
 Then the user-visible times on both backends: ``detect`` (labels and fits) per scene and
-``analyze_plate`` per synthetic 1280x1024 plate. The last column is what the kernel earns: how
-many times slower ``detect`` (kernels on) would be with this one stage on the plain path. The kernels run on the threads the command line would use
-(``labauto.cli.process.configure``: one per CPU, ``OMP_WAIT_POLICY=PASSIVE``).
+``analyze_plate`` per synthetic 1280x1024 plate. The last column is what the kernel earns: how many
+times slower ``detect`` (kernels on) would be with this one stage on the plain path. The kernels run
+on the threads the command line would use (``labauto.cli.process.configure``: one per CPU,
+``OMP_WAIT_POLICY=PASSIVE``).
 
 Run: ``python benchmarks/bench_kernels.py [--seeds N] [--plates N] [--repeats R]``.
 """
@@ -135,9 +136,8 @@ def main() -> None:
         if name in kernels.built():
             compiled = ms(per_stage[name, "compiled"])
             slower = (detect_compiled + plain - compiled) / detect_compiled
-            print(
-                f"{name:12s} {compiled:12.2f} {plain:10.2f} {plain / compiled:8.1f}x {slower:17.2f}x"
-            )
+            speed_up = plain / compiled
+            print(f"{name:12s} {compiled:12.2f} {plain:10.2f} {speed_up:8.1f}x {slower:17.2f}x")
         else:
             print(f"{name:12s} {'(removed)':>12s} {plain:10.2f}")
     print()
