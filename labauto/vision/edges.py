@@ -203,8 +203,8 @@ def edge_contours(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Ordered chains of an edge map with their gradients and (sub-pixel) positions.
 
-    :func:`link_edges`, :func:`gradient_at` and :func:`refine_subpixel` in one kernel call, on
-    :func:`labauto.vision.kernels.threads` threads (the result does not depend on their number).
+    :func:`link_edges`, :func:`gradient_at` and :func:`refine_subpixel` (with the compiled
+    kernel: in one call, on one thread).
 
     Parameters
     ----------
@@ -243,7 +243,6 @@ def edge_contours(
             gy,
             bool(subpixel),
             _workspace(kernel),
-            kernels.threads(),
         )
     pixels, offsets = _outer_chains(edges, min_length, max_length)
     points, gradients = _sample(pixels, gx, gy, subpixel)
