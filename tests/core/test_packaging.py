@@ -13,6 +13,7 @@ import os
 import shutil
 import subprocess
 import sys
+import sysconfig
 import zipfile
 from pathlib import Path
 
@@ -62,7 +63,7 @@ result = labauto.detect(make_scene(np.random.default_rng(5))[0])
 print(json.dumps({
     "file": labauto.__file__, "backend": kernels.backend(), "built": kernels.built(),
     "describe": kernels.describe(), "level": kernels.level(),
-    "kernel_files": [kernels.compiled(n).__file__ for n in kernels.built()],
+    "kernel_files": [getattr(kernels.compiled(n), "__file__", None) for n in kernels.built()],
     "objects": [[o["n_points"], o["shape"], round(o["d_alpha_median"], 6)]
                 for o in result.to_dict()["objects"]],
 }))
@@ -70,10 +71,17 @@ print(json.dumps({
 
 
 def _probe(target: Path, kernels_setting: str) -> dict:
-    """Import labauto from ``target`` (ahead of the development install) and detect once."""
-    env = {**os.environ, "PYTHONPATH": str(target), "LABAUTO_KERNELS": kernels_setting}
+    """Import labauto from ``target`` and detect once. ``-S``: without the site hooks, so the
+    development install (an editable one) is not seen; its dependencies come from purelib."""
+    path = os.pathsep.join([str(target), sysconfig.get_paths()["purelib"]])
+    env = {**os.environ, "PYTHONPATH": path, "LABAUTO_KERNELS": kernels_setting}
     done = subprocess.run(
-        [sys.executable, "-c", PROBE], capture_output=True, text=True, timeout=120, env=env
+        [sys.executable, "-S", "-c", PROBE],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+        cwd=target,  # not the source tree
     )
     assert done.returncode == 0, done.stderr[-2000:]
     info = json.loads(done.stdout)
