@@ -17,7 +17,5 @@ def backend(request: pytest.FixtureRequest) -> str:
     """
     if request.param == "compiled" and not kernels.built():
         pytest.skip("no compiled kernels are built in this install")
-    before = kernels.backend()
-    kernels.use(request.param)
-    yield request.param
-    kernels.use(before)
+    with kernels.using(request.param):
+        yield request.param

@@ -26,10 +26,12 @@ Threads
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib
 import importlib.util
 import os
+from collections.abc import Iterator
 from types import ModuleType
 
 #: The kernels this version of labauto has, by module name (``labauto.vision.kernels.<name>``).
@@ -136,6 +138,17 @@ def use(name: str) -> None:
     if name == "compiled" and not _load():
         raise ValueError("no compiled kernels are installed: only the plain backend runs")
     _backend = name
+
+
+@contextlib.contextmanager
+def using(name: str) -> Iterator[None]:
+    """Run the ``with`` block on the backend ``name``, then switch back (see :func:`use`)."""
+    before = backend()
+    use(name)
+    try:
+        yield
+    finally:
+        use(before)
 
 
 def compiled(name: str) -> ModuleType | None:
