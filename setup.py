@@ -1,93 +1,121 @@
-"""Build the compiled kernels of :mod:`labauto.vision.kernels` (everything else is pyproject.toml).
+"""Build the optional compiled kernels of :mod:`labauto.vision.kernels` (the rest: pyproject.toml).
 
-Every ``labauto/vision/kernels/*.pyx`` becomes one C extension. On Linux the kernels are built
-with OpenMP so their ``prange`` loops use all cores; elsewhere they run on one core, same result.
+Every ``labauto/vision/kernels/*.pyx`` becomes one C extension. They are accelerators only:
+every algorithm also runs in plain numpy/OpenCV, so when a kernel cannot be compiled (no C
+compiler, no Python headers) the build says so and goes on without it, and labauto runs on the
+plain path (``labauto --version`` says which). ``LABAUTO_BUILD_KERNELS=0`` skips them on
+purpose.
 
-CPU target (x86-64): the kernels are compiled for the CPU of the machine that builds them
-(``-march=native``), because labauto is installed from source on the machine that runs it and the
-per-pixel loops run about 2x faster with that CPU's widest vectors (AVX2 / AVX-512) than with the
-SSE4.2 every x86-64 CPU since about 2009 has. ``LABAUTO_MARCH`` sets another target, e.g.
-``LABAUTO_MARCH=x86-64-v2 pip wheel .`` for a wheel meant for other machines. The vector
-extensions the target uses are written to ``kernels/_build.py``; on import, labauto checks that the
-CPU has them and otherwise stops with an error that names them (instead of crashing on an illegal
-instruction), see :func:`labauto.vision.kernels.check_cpu`.
+Portable by default: no ``-march``; the compiler's generic target for the platform (x86-64:
+SSE2; aarch64: NEON), so a wheel runs on any CPU of its architecture. On x86-64 the kernels are
+built a second time for ``x86-64-v3`` (AVX2: 256-bit vectors, which the per-pixel loops use
+for up to 3x their speed) into ``labauto.vision.kernels.v3``; labauto loads those where the CPU
+runs them (``kernels/_cpu.pyx``) and the generic ones elsewhere. ``LABAUTO_MARCH`` instead
+builds one CPU-specific set (e.g. ``LABAUTO_MARCH=native`` on the machine that runs it). The
+flags used are written to ``kernels/_build.py`` and shown by ``labauto --version``.
+
+On Linux the kernels are built with OpenMP so their ``prange`` loops can use several threads
+(the caller chooses how many: :func:`labauto.vision.kernels.set_threads`).
 
 Floating point: ``-ffp-contract=off`` keeps the compiler from fusing a multiply and an add into
-one FMA instruction where the target has it. Fused and unfused results differ in the last bit, and
-the compiler fuses differently where the same code is inlined in two places, so without it the same
-ellipse fit could come out 1 ulp apart by path or by target; with it, every target gives the same
-numbers and the kernels match their plain-numpy references exactly where the tests say so.
+one FMA instruction where the target has it, so every target gives the same numbers and the
+kernels match the plain path exactly where the tests say so.
 """
 
 import os
 import platform
-import shlex
-import subprocess
 import sys
-import sysconfig
 from pathlib import Path
 
-from Cython.Build import cythonize
 from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
 
 KERNELS = Path("labauto/vision/kernels")
 OPENMP = ["-fopenmp"] if sys.platform.startswith("linux") else []
-X86_64 = platform.machine().lower() in ("x86_64", "amd64")
-MARCH = os.environ.get("LABAUTO_MARCH", "native").strip() if X86_64 else ""
-
-# compiler macro of each vector extension -> its name in /proc/cpuinfo's flags
-VECTOR_EXTENSIONS = {
-    "__SSE4_2__": "sse4_2",
-    "__AVX__": "avx",
-    "__AVX2__": "avx2",
-    "__FMA__": "fma",
-    "__BMI2__": "bmi2",
-    "__AVX512F__": "avx512f",
-    "__AVX512BW__": "avx512bw",
-    "__AVX512DQ__": "avx512dq",
-    "__AVX512VL__": "avx512vl",
-    "__AVX512CD__": "avx512cd",
-}
-
-
-def target_features(march: str) -> list[str]:
-    """The vector extensions ``-march=march`` lets the compiler use (empty if it cannot say)."""
-    if not march:
-        return []
-    compiler = shlex.split(sysconfig.get_config_var("CC") or "cc")
-    try:
-        macros = subprocess.run(
-            [*compiler, f"-march={march}", "-dM", "-E", "-x", "c", os.devnull],
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout
-    except (OSError, subprocess.CalledProcessError) as exc:
-        raise SystemExit(f"the C compiler {compiler[0]!r} rejects -march={march}: {exc}") from None
-    defined = {line.split()[1] for line in macros.splitlines() if line.startswith("#define ")}
-    return [flag for macro, flag in VECTOR_EXTENSIONS.items() if macro in defined]
-
-
-features = target_features(MARCH)
-(KERNELS / "_build.py").write_text(
-    '"""Written by setup.py: the CPU target the kernels were compiled for."""\n\n'
-    f"MARCH = {MARCH!r}\n"
-    f"CPU_FEATURES = {tuple(features)!r}\n"
-)
-
-extensions = [
-    Extension(
-        f"labauto.vision.kernels.{pyx.stem}",
-        [str(pyx)],
-        extra_compile_args=[
-            "-O3",
-            "-ffp-contract=off",
-            *([f"-march={MARCH}"] if MARCH else []),
-            *OPENMP,
-        ],
-        extra_link_args=OPENMP,
-    )
-    for pyx in sorted(KERNELS.glob("*.pyx"))
+MARCH = os.environ.get("LABAUTO_MARCH", "").strip()
+COMPILE_ARGS = [
+    "-O3",
+    "-ffp-contract=off",
+    "-frecord-gcc-switches",  # the command line in the binary, for the tests to read
+    *([f"-march={MARCH}"] if MARCH else []),
+    *OPENMP,
 ]
+WANTED = os.environ.get("LABAUTO_BUILD_KERNELS", "1").strip() not in ("0", "no", "off")
+X86_64 = platform.machine().lower() in ("x86_64", "amd64")
+#: extra builds for wider vectors, picked at run time: (subpackage, -march)
+LEVELS = [("v3", "x86-64-v3")] if X86_64 and not MARCH else []
 
-setup(ext_modules=cythonize(extensions, language_level=3, quiet=True))
+
+def record(built: list[str]) -> None:
+    """Write ``kernels/_build.py``: the flags and the kernels this build compiled."""
+    (KERNELS / "_build.py").write_text(
+        '"""Written by setup.py: how the compiled kernels were built."""\n\n'
+        f"COMPILE_ARGS = {tuple(COMPILE_ARGS)!r}\n"
+        f"LINK_ARGS = {tuple(OPENMP)!r}\n"
+        f"LEVELS = {tuple(LEVELS)!r}\n"
+        f"BUILT = {tuple(sorted(built))!r}\n"
+    )
+
+
+class OptionalKernels(build_ext):
+    """build_ext that skips a kernel it cannot compile instead of failing the install."""
+
+    def run(self) -> None:
+        self.compiled: list[str] = []
+        try:
+            super().run()
+        except Exception as exc:  # no compiler at all (e.g. DistutilsPlatformError)
+            self.warn(f"labauto: compiled kernels skipped ({exc}); the plain path will run")
+        record(self.compiled)
+        if self.inplace:
+            return
+        # a regular (wheel) build: the _build.py next to the built modules
+        target = Path(self.build_lib) / KERNELS / "_build.py"
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text((KERNELS / "_build.py").read_text())
+
+    def build_extension(self, ext: Extension) -> None:
+        try:
+            super().build_extension(ext)
+        except Exception as exc:  # CompileError, LinkError, a missing header
+            self.warn(f"labauto: kernel {ext.name} skipped ({exc}); the plain path will run")
+        else:
+            self.compiled.append(ext.name.removeprefix("labauto.vision.kernels."))
+
+
+def extensions() -> list[Extension]:
+    if not WANTED:
+        return []
+    try:
+        from Cython.Build import cythonize
+    except ImportError:
+        print("labauto: Cython is missing: compiled kernels skipped", file=sys.stderr)
+        return []
+    modules = [
+        Extension(
+            f"labauto.vision.kernels.{pyx.stem}",
+            [str(pyx)],
+            extra_compile_args=COMPILE_ARGS,
+            extra_link_args=OPENMP,
+        )
+        for pyx in sorted(KERNELS.glob("*.pyx"))
+    ]
+    modules = cythonize(modules, language_level=3, quiet=True)
+    for level, march in LEVELS:  # the same sources again, as modules of their own name
+        again = [
+            Extension(
+                f"labauto.vision.kernels.{level}.{pyx.stem}",
+                [str(pyx)],
+                extra_compile_args=[*COMPILE_ARGS, f"-march={march}"],
+                extra_link_args=OPENMP,
+            )
+            for pyx in sorted(KERNELS.glob("*.pyx"))
+            if not pyx.stem.startswith("_")
+        ]
+        build_dir = str(Path("build") / "levels" / level)
+        modules += cythonize(again, language_level=3, quiet=True, build_dir=build_dir)
+    return modules
+
+
+record([])  # until build_ext says otherwise (a source tree, a build without kernels)
+setup(ext_modules=extensions(), cmdclass={"build_ext": OptionalKernels})

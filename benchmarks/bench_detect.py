@@ -35,12 +35,14 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
+from labauto.cli import process
 from labauto.synthetic.shapes import make_scene
 from labauto.vision import detector, edges
 from labauto.vision.contours import Contours
 from labauto.vision.detector import DetectorParams
 from labauto.vision.detector import detect as vision_detect
-from labauto.vision.gradient import as_uint8_image, color_gradient
+from labauto.vision.gradient import color_gradient
+from labauto.vision.image import as_image
 from labauto.vision.shape_angle import shape_angles
 
 Detection = tuple[float, float, float | None, float | None]  # cx, cy, a, b
@@ -147,7 +149,7 @@ STAGES = (
 def stage_times(image: np.ndarray, params: DetectorParams) -> list[float]:
     """Seconds per stage of ``detect(image, params)`` (Canny method), same calls in order."""
     t = [time.perf_counter()]
-    img = as_uint8_image(image)
+    img = as_image(image)
     gx, gy = color_gradient(img, params.blur_sigma)
     t.append(time.perf_counter())
     edge_map = edges.canny_edges(gx, gy, params.canny_low, params.canny_high)
@@ -181,6 +183,7 @@ def main() -> None:
     parser.add_argument("--api", action="store_true", help="time labauto.detect if it exists")
     args = parser.parse_args()
     cv2.setNumThreads(args.threads)
+    process.configure()  # the kernels' threads and OpenMP's wait policy, as the CLI sets them
 
     name, detect = _detect_fn(args.api)
     rows: list[tuple[str, Callable[[np.ndarray], list[Detection]]]] = []

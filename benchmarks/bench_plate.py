@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from labauto.cli import process
 from labauto.synthetic.plates import PlateTruth, generate_plate, score_plate
 from labauto.vision.detector import DetectorParams
 from labauto.vision.dish import hough_dish
@@ -139,6 +140,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--threads", type=int, default=None, help="cv2.setNumThreads")
     args = ap.parse_args()
+    process.configure()  # the kernels' threads and OpenMP's wait policy, as the CLI sets them
     if args.threads is not None:
         cv2.setNumThreads(args.threads)
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import importlib
 import os
 import typing
 from pathlib import Path
@@ -37,6 +36,8 @@ from pydantic import (
 
 from labauto.errors import ConfigError
 from labauto.safeyaml import YamlRefused, load_yaml, read_text_limited, read_yaml_file
+from labauto.vision.detector import DetectorParams
+from labauto.vision.plate import PlateParams
 
 #: Environment variables that override one config key each.
 ENV_OVERRIDES: dict[str, str] = {
@@ -494,11 +495,8 @@ def apply_env_overrides(data: dict[str, Any], environ: dict[str, str] | None = N
     return used
 
 
-#: Config sections that hold the parameters of a vision dataclass: (module, class name).
-DATACLASS_SECTIONS: dict[str, tuple[str, str]] = {
-    "detector": ("labauto.vision.detector", "DetectorParams"),
-    "plate": ("labauto.vision.plate", "PlateParams"),
-}
+#: Config sections that hold the parameters of a vision dataclass, and that dataclass.
+DATACLASS_SECTIONS: dict[str, type] = {"detector": DetectorParams, "plate": PlateParams}
 
 #: Ranges and choices for fields of those dataclasses, checked when a config is loaded.
 SECTION_CONSTRAINTS: dict[str, dict[str, Any]] = {
@@ -590,8 +588,7 @@ def section_model(section: str) -> type[BaseModel]:
     rule of :func:`_generic_rule`, and pairs of fields such as ``canny_low``/``canny_high`` or
     ``min_x``/``max_x`` must be ordered. Numbers must be finite (no NaN, no infinity).
     """
-    module_name, class_name = DATACLASS_SECTIONS[section]
-    cls = getattr(importlib.import_module(module_name), class_name)
+    cls = DATACLASS_SECTIONS[section]
     hints = typing.get_type_hints(cls)
     constraints = SECTION_CONSTRAINTS.get(section, {})
     fields: dict[str, Any] = {}
@@ -613,24 +610,23 @@ def section_model(section: str) -> type[BaseModel]:
     pairs = _bound_pairs(list(fields))
     validators = {"_ordered_bounds": _check_bound_pairs(pairs)} if pairs else None
     return create_model(
-        f"{class_name}Section", __base__=Section, __validators__=validators, **fields
+        f"{cls.__name__}Section", __base__=Section, __validators__=validators, **fields
     )
 
 
 def section_params(config: Config, section: str) -> Any:
     """The dataclass (e.g. ``DetectorParams``) of a config's dataclass section."""
-    module_name, class_name = DATACLASS_SECTIONS[section]
-    cls = getattr(importlib.import_module(module_name), class_name)
+    cls = DATACLASS_SECTIONS[section]
     validated = section_model(section).model_validate(getattr(config, section))
     return cls(**{item.name: getattr(validated, item.name) for item in dataclasses.fields(cls)})
 
 
-def detector_params(config: Config) -> Any:
+def detector_params(config: Config) -> DetectorParams:
     """The ``DetectorParams`` of a config's ``detector`` section."""
     return section_params(config, "detector")
 
 
-def plate_params(config: Config) -> Any:
+def plate_params(config: Config) -> PlateParams:
     """The ``PlateParams`` of a config's ``plate`` section."""
     return section_params(config, "plate")
 
@@ -657,13 +653,13 @@ def parse_config(
         config = Config.model_validate(data)
     except ValidationError as exc:
         raise ConfigError(_format(source, exc)) from None
-    for section, (_module, class_name) in DATACLASS_SECTIONS.items():
+    for section, cls in DATACLASS_SECTIONS.items():
         try:
             section_params(config, section)
         except ValidationError as exc:
             raise ConfigError(_format(source, exc, prefix=section)) from None
         except (ValueError, TypeError) as exc:  # the dataclass's own checks
-            message = str(exc).replace(f"{class_name}.", f"{section}.")
+            message = str(exc).replace(f"{cls.__name__}.", f"{section}.")
             raise ConfigError(f"{source}: {message}") from None
     return config
 

@@ -1,15 +1,12 @@
 """Reading and writing image files, with errors that name the file and what is wrong with it.
 
 :func:`read_image` is the one reader of image files: ``labauto detect``, ``labauto plate`` and
-the Python API all get the same ``uint8`` image from a file, whatever its sample type:
-
-* ``uint8``: as stored.
-* 16-bit integers: scaled from the bits actually used to 0-255. A PNG's ``sBIT`` chunk says how
-  many bits are significant; without it, the depth is the smallest of 8, 10, 12, 14 and 16 bits
-  that holds the image's largest value (so 12-bit camera data in a 16-bit PNG fills 0-255
-  instead of reading as black).
-* floating point (e.g. a float TIFF): values in [0, 1] are scaled by 255, values in [0, 255]
-  are kept; other ranges, NaN and infinities are refused.
+the Python API all get the same ``uint8`` image from a file. The decoded pixels go through the
+same validator as an array given directly (:func:`labauto.vision.image.as_image`); what the file
+adds is the bit depth of 16-bit integer samples: a PNG's ``sBIT`` chunk says how many bits are
+significant, and without it the depth is the smallest of 8, 10, 12, 14 and 16 bits that holds the
+image's largest value (so 12-bit camera data in a 16-bit PNG fills 0-255 instead of reading as
+black).
 
 Before anything is decoded, the size a PNG header claims is checked against a pixel budget
 (``max_pixels``), so a tiny file that claims 100000 x 100000 pixels is refused instead of
@@ -25,6 +22,7 @@ import cv2
 import numpy as np
 
 from labauto.errors import ImageError
+from labauto.vision.image import as_image
 
 MAX_PIXELS = 64_000_000
 """Largest image read by default (64 Mpixel; a plate camera gives 1-20 Mpixel)."""
@@ -78,12 +76,11 @@ def read_image(path: str | Path, max_pixels: int = MAX_PIXELS) -> np.ndarray:
     if image.size == 0:
         raise ImageError(f"{path}: image has no pixels")
     _check_budget(path, image.shape[1], image.shape[0], max_pixels)
-    image = to_uint8(image, png_significant_bits(header), source=str(path))
-    if image.ndim == 3 and image.shape[2] == 4:
-        image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
-    elif image.ndim == 3 and image.shape[2] == 1:
-        image = image[:, :, 0]
-    return image
+    bits = sample_depth(image, png_significant_bits(header))
+    try:
+        return as_image(image, min_side=1, significant_bits=bits, name=str(path))
+    except ValueError as exc:
+        raise ImageError(str(exc)) from None
 
 
 def _check_budget(path: Path, width: int, height: int, max_pixels: int) -> None:
@@ -124,41 +121,18 @@ def png_significant_bits(header: bytes) -> int | None:
     return None
 
 
-def to_uint8(image: np.ndarray, significant_bits: int | None = None, source: str = "image"):
-    """Map an image of any sample type to ``uint8`` (the rules of the module docstring).
+def sample_depth(image: np.ndarray, significant_bits: int | None = None) -> int | None:
+    """The bit depth of an integer image's samples (``None`` for ``uint8`` and floats).
 
-    Raises
-    ------
-    ImageError
-        Negative integers, NaN or infinite values, or floats outside [0, 255].
+    ``significant_bits`` (a PNG's ``sBIT``) when given, else the smallest of 8, 10, 12, 14 and 16
+    bits that holds the image's largest value.
     """
-    if image.dtype == np.uint8:
-        return image
-    if image.dtype == np.bool_:
-        return image.astype(np.uint8) * 255
-    if np.issubdtype(image.dtype, np.integer):
-        low, high = int(image.min()), int(image.max())
-        if low < 0:
-            raise ImageError(f"{source}: negative sample values ({low}) in a {image.dtype} image")
-        bits = significant_bits or next(
-            (d for d in _DEPTHS if high < 2**d), max(16, high.bit_length())
-        )
-        scale = 255.0 / (2**bits - 1)
-        return np.clip(np.rint(image * scale), 0, 255).astype(np.uint8)
-    if np.issubdtype(image.dtype, np.floating):
-        if not np.all(np.isfinite(image)):
-            raise ImageError(f"{source}: image has NaN or infinite sample values")
-        low, high = float(image.min()), float(image.max())
-        if low >= 0 and high <= 1.0:
-            scaled = image * 255.0
-        elif low >= 0 and high <= 255.0:
-            scaled = image
-        else:
-            raise ImageError(
-                f"{source}: floating-point samples from {low:g} to {high:g}; expected 0-1 or 0-255"
-            )
-        return np.clip(np.rint(scaled), 0, 255).astype(np.uint8)
-    raise ImageError(f"{source}: unsupported sample type {image.dtype}")
+    if image.dtype == np.uint8 or image.dtype.kind not in "iu":
+        return None
+    if significant_bits:
+        return significant_bits
+    high = max(int(image.max()), 0)
+    return next((d for d in _DEPTHS if high < 2**d), max(16, high.bit_length()))
 
 
 def check_image_target(path: str | Path) -> Path:

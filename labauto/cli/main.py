@@ -11,12 +11,30 @@ import sys
 import click
 
 from labauto import __version__
+from labauto.cli import process
 from labauto.drivers.errors import DeviceError
 from labauto.errors import LabautoError
 
 
+def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
+    if not value or ctx.resilient_parsing:
+        return
+    from labauto.vision import kernels
+
+    click.echo(f"labauto, version {__version__}")
+    click.echo(kernels.describe())
+    ctx.exit()
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(__version__, prog_name="labauto")
+@click.option(
+    "--version",
+    is_flag=True,
+    expose_value=False,
+    is_eager=True,
+    callback=_print_version,
+    help="Show the version and which vision backend runs, and exit.",
+)
 @click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
 @click.pass_context
 def cli(ctx: click.Context, debug: bool) -> None:
@@ -50,6 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     debug = "--debug" in args
     try:
+        process.configure()
         cli.main(args=args, prog_name="labauto", standalone_mode=False)
     except click.exceptions.Exit as exc:
         return exc.exit_code

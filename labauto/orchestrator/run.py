@@ -47,7 +47,7 @@ from labauto.orchestrator.planning import PickRules, plan_picks
 from labauto.orchestrator.recovery import with_retries
 from labauto.plugin_manager import Plugins
 from labauto.store import Store
-from labauto.store.convert import colony_rows
+from labauto.store.convert import colony_rows, plate_detection_rows
 from labauto.store.states import PickState, RunState
 
 
@@ -399,7 +399,8 @@ class ColonyPickingRun:
         method = f"plate:{self.plate_params.method}"
         local_ids = [c.id for c in result.colonies]
         index_of = {local: i for i, local in enumerate(local_ids)}
-        colonies = colony_rows(result.to_dict())
+        document = result.to_dict()
+        colonies = colony_rows(document)
         for i, row in enumerate(colonies):
             row["detection"] = i
         planned = plan_picks(result.colonies, calibration, self.rules, result.dish)
@@ -434,7 +435,7 @@ class ColonyPickingRun:
             width=result.width,
             height=result.height,
             sha256=digest,
-            detections=[_detection_row(c, method) for c in result.colonies],
+            detections=plate_detection_rows(document, method),
             colonies=colonies,
             picks=picks,
             events=events,
@@ -567,19 +568,3 @@ def _summary(info: dict[str, Any]) -> str:
     """A one-line description of a device from its ``identify()`` dict."""
     keys = ("kind", "model", "firmware", "firmware_version", "url", "endpoint", "state")
     return ", ".join(f"{key} {info[key]}" for key in keys if info.get(key) not in (None, ""))
-
-
-def _detection_row(colony: Any, method: str) -> dict[str, Any]:
-    """The detection row of one object the plate analysis measured."""
-    return {
-        "object_index": colony.id,
-        "method": method,
-        "centroid_x": float(colony.centroid[0]),
-        "centroid_y": float(colony.centroid[1]),
-        "n_points": len(colony.contour),
-        "closed": True,
-        "d_alpha_median": float(colony.d_alpha_median),
-        "centroid_inside": True,
-        "is_des": colony.klass != "merged",
-        "area_px": float(colony.area_px),
-    }

@@ -13,7 +13,7 @@ See :mod:`labauto.store.repository` for the rules every method follows (commit p
 frozen records, audited state changes) and :mod:`labauto.store.states` for the state machines.
 """
 
-from .convert import colony_rows, detection_rows
+from .convert import colony_rows, detection_rows, plate_detection_rows
 from .db import (
     current_revision,
     downgrade,
@@ -112,6 +112,7 @@ __all__ = [
     "head_revision",
     "make_engine",
     "migrations_dir",
+    "plate_detection_rows",
     "safe_url",
     "upgrade",
     "utcnow",

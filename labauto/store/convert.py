@@ -2,8 +2,10 @@
 
 The orchestrator has a ``DetectionResult`` or ``PlateResult`` from the vision layer; these turn
 their documented JSON forms into the rows :meth:`Store.add_detections` and
-:meth:`Store.add_colonies` take. Only the documented keys are read, so keys added to the JSON
-later are ignored rather than refused.
+:meth:`Store.add_colonies` take. Detection rows are built in one place, :func:`detection_rows`;
+a plate result's colonies become detections by :func:`plate_detection_rows`, which states what
+a colony says about each detection field. Only the documented keys are read, so keys added to
+the JSON later are ignored rather than refused.
 
 Example::
 
@@ -23,6 +25,7 @@ _DETECTION_COPIED = (
     "n_points", "closed", "d_alpha_median", "d_alpha_mean", "centroid_inside", "is_des",
     "shape", "ellipse", "area_px",
 )  # fmt: skip
+_COLONY_AS_OBJECT = ("id", "centroid", "d_alpha_median", "area_px")
 _COLONY_COPIED = ("area_px", "d_alpha_median", "estimated_count", "mix_score", "contour")
 
 
@@ -69,6 +72,37 @@ def detection_rows(result: Mapping[str, Any]) -> list[dict[str, Any]]:
         row.update((key, obj[key]) for key in _DETECTION_COPIED if key in obj)
         rows.append(row)
     return rows
+
+
+def plate_detection_rows(plate: Mapping[str, Any], method: str) -> list[dict[str, Any]]:
+    """Rows for :meth:`Store.add_detections` from a plate result's JSON: one per colony.
+
+    Each colony is turned into an object of the detection JSON and passed to
+    :func:`detection_rows`: ``n_points`` is the length of its contour, ``closed`` is true (a
+    colony's contour is the outline of a region, closed by construction), ``is_des`` is true
+    for the classes the plate analysis took as single deformed ellipses (authentic, mixed)
+    and false for merged bodies. ``centroid_inside``, ``d_alpha_mean``, ``shape`` and
+    ``ellipse`` are not reported by the plate analysis and stay NULL.
+
+    Parameters
+    ----------
+    plate : mapping
+        ``PlateResult.to_dict()`` (see :func:`colony_rows`).
+    method : str
+        What found them, e.g. ``"plate:canny"``.
+    """
+    if "colonies" not in plate:
+        raise InvalidValue("plate result must have 'colonies'")
+    objects = [
+        {
+            **{key: colony[key] for key in _COLONY_AS_OBJECT if key in colony},
+            "n_points": len(colony.get("contour") or ()),
+            "closed": True,
+            "is_des": colony.get("class") != "merged",
+        }
+        for colony in plate["colonies"]
+    ]
+    return detection_rows({"method": method, "objects": objects})
 
 
 def colony_rows(

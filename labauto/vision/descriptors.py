@@ -51,10 +51,11 @@ Choices where the paper is vague (each is a documented decision, not an accident
 
 Implementation: the per-contour loops (dropping repeated points, area and centroid, second
 moments, perimeters, the convex hull by Andrew's monotone chain and the minimum-area box by
-rotating calipers over it, all in float64) are one compiled kernel,
-:func:`labauto.vision.kernels.shape.measure_contours`, which takes any number of contours in one
-call; :func:`shape_descriptors` is a batch of one and :func:`shape_descriptors_batch` the batch
-the detector uses. The same call also computes the polar series of
+rotating calipers over it, all in float64) are written out in numpy in
+:mod:`labauto.vision.shape_plain` (the reference); the compiled kernel
+:func:`labauto.vision.kernels.shape.measure_contours` does the same for any number of contours
+in one call. :func:`shape_descriptors` is a batch of one and :func:`shape_descriptors_batch`
+the batch the detector uses. The same call also computes the polar series of
 :mod:`labauto.vision.harmonics`.
 """
 
@@ -62,11 +63,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from types import ModuleType
 
 import numpy as np
 
-from labauto.vision import kernels
-from labauto.vision.kernels import shape as _kernel
+from labauto.vision import kernels, shape_plain
+from labauto.vision.shape_plain import NON_FINITE, OK, ONE_POINT, TOO_FEW_POINTS, VALUE_NAMES
 
 _AXES_METHODS = ("moments", "extent")
 
@@ -256,7 +258,12 @@ def as_contour(points: np.ndarray, *, min_points: int, name: str = "points") -> 
 def drop_repeated_points(points: np.ndarray, *, closed: bool) -> np.ndarray:
     """Drop points equal to their predecessor (if closed, also a last point equal to the first)."""
     pts = np.ascontiguousarray(points, dtype=np.float64)
-    return _kernel.drop_repeated(pts, np.array([0, len(pts)], np.int64), closed)[0]
+    return _shape().drop_repeated(pts, np.array([0, len(pts)], np.int64), closed)[0]
+
+
+def _shape() -> ModuleType:
+    """The compiled shape kernel when it runs, else its plain twin (the same functions)."""
+    return kernels.compiled("shape") or shape_plain
 
 
 def polygon_area_centroid(points: np.ndarray) -> tuple[float, np.ndarray]:
@@ -275,7 +282,7 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
     Andrew's monotone chain in float64, counter-clockwise in (x, y) axes (clockwise as seen in
     an image, y down), without collinear vertices: collinear points give their two ends.
     """
-    return _kernel.convex_hull(np.ascontiguousarray(points, dtype=np.float64))
+    return _shape().convex_hull(np.ascontiguousarray(points, dtype=np.float64))
 
 
 def min_area_box(points: np.ndarray) -> tuple[float, float]:
@@ -284,7 +291,7 @@ def min_area_box(points: np.ndarray) -> tuple[float, float]:
     Rotating calipers over the convex hull (one side of the box on each hull edge in turn), in
     float64. Returns ``(0, 0)`` for a single point and ``(L, 0)`` for collinear points.
     """
-    return _kernel.min_area_box(np.ascontiguousarray(points, dtype=np.float64))
+    return _shape().min_area_box(np.ascontiguousarray(points, dtype=np.float64))
 
 
 def bending_energy(points: np.ndarray, *, closed: bool = True, sigma: float = 0.0) -> float:
@@ -392,12 +399,12 @@ class MeasuredContours:
     Attributes
     ----------
     status : np.ndarray
-        (K,) int8 descriptor status, ``labauto.vision.kernels.shape.OK`` where the descriptors
+        (K,) int8 descriptor status, ``labauto.vision.shape_plain.OK`` where the descriptors
         exist (see :func:`raise_for_status` for the others).
     series_status : np.ndarray
         (K,) int8, ``SERIES_OK`` where the polar series was computed.
     values : dict of str to np.ndarray
-        (K,) arrays named as ``labauto.vision.kernels.shape.VALUE_NAMES``: area, centroid_x/y,
+        (K,) arrays named as ``labauto.vision.shape_plain.VALUE_NAMES``: area, centroid_x/y,
         semi_major/minor, perimeter (closed), closing (its last segment), convex_perimeter,
         elongation, rectangularity (NaN unless status is OK); centre_x/y, star_shapedness,
         winding of the polar series.
@@ -480,32 +487,27 @@ def measure_contours(
     else:
         centres = np.ascontiguousarray(centroids, dtype=np.float64).reshape(k, 2)
         given = True
-    status, series_status, values, r, rho = _kernel.measure_contours(
-        pts,
-        off,
-        min_points,
-        want.reshape(k),
-        centres,
-        given,
-        max_elongation,
-        n_r,
-        n_rho,
-        kernels.threads(),
-    )
+    arguments = (pts, off, min_points, want.reshape(k), centres, given, max_elongation, n_r, n_rho)
+    kernel = kernels.compiled("shape")
+    if kernel is None:
+        measured = shape_plain.measure_contours(*arguments)
+    else:
+        measured = kernel.measure_contours(*arguments, kernels.threads())
+    status, series_status, values, r, rho = measured
     return MeasuredContours(
-        status, series_status, dict(zip(_kernel.VALUE_NAMES, values.T, strict=True)), r, rho
+        status, series_status, dict(zip(VALUE_NAMES, values.T, strict=True)), r, rho
     )
 
 
 def raise_for_status(status: int, name: str = "points") -> None:
     """Raise the ValueError of a descriptor status of :func:`measure_contours` (not OK)."""
-    if status == _kernel.OK:
+    if status == OK:
         return
-    if status == _kernel.TOO_FEW_POINTS:
+    if status == TOO_FEW_POINTS:
         raise ValueError(f"{name} has too few points")
-    if status == _kernel.NON_FINITE:
+    if status == NON_FINITE:
         raise ValueError(f"{name} contains NaN or infinite coordinates")
-    if status == _kernel.ONE_POINT:
+    if status == ONE_POINT:
         raise ValueError(f"{name}: all points are identical; a shape needs at least 2 distinct")
     raise ValueError(
         f"{name}: the polygon crosses itself so that a second moment is negative; "
@@ -532,7 +534,7 @@ def drop_repeated_points_batch(
         to the first.
     """
     pts = np.ascontiguousarray(points, dtype=np.float64)
-    return _kernel.drop_repeated(pts, np.ascontiguousarray(offsets, dtype=np.int64), True)
+    return _shape().drop_repeated(pts, np.ascontiguousarray(offsets, dtype=np.int64), True)
 
 
 def shape_descriptors_batch(
@@ -561,7 +563,7 @@ def shape_descriptors_batch(
     measured = measure_contours(points, offsets, min_points=min_points)
     v = measured.values
     return DescriptorArrays(
-        valid=measured.status == _kernel.OK,
+        valid=measured.status == OK,
         area=v["area"],
         centroid=np.column_stack((v["centroid_x"], v["centroid_y"])),
         semi_major=v["semi_major"],
@@ -592,4 +594,4 @@ def polygon_area_centroid_batch(
         (K, 2) area centroids (the vertex mean where the area is zero).
     """
     pts = np.ascontiguousarray(points, dtype=np.float64)
-    return _kernel.area_centroids(pts, np.ascontiguousarray(offsets, dtype=np.int64))
+    return _shape().area_centroids(pts, np.ascontiguousarray(offsets, dtype=np.int64))

@@ -26,8 +26,8 @@ import numpy as np
 from labauto.vision.contours import Contours, canny_contours, color_contours
 from labauto.vision.ellipse import Ellipse
 from labauto.vision.ellipse_fit import fit_selected_ellipses
-from labauto.vision.gradient import as_uint8_image
 from labauto.vision.harmonics import classify_shapes
+from labauto.vision.image import as_image
 from labauto.vision.shape_angle import (
     DEFAULT_DES_THRESHOLD_DEG,
     DEFAULT_MAX_GAP_FRACTION,
@@ -185,7 +185,7 @@ def detect(image: np.ndarray, params: DetectorParams = DetectorParams()) -> Dete
     """
     start = time.perf_counter()
     validate_params(params)
-    img = as_uint8_image(image)
+    img = as_image(image)
     contours = extract_contours(img, params)
     objects = _objects(contours, params)
     elapsed_ms = (time.perf_counter() - start) * 1e3

@@ -14,6 +14,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from labauto.vision.image import as_image
+
 _DISH_EDGE_CONTRAST = 18.0  # colour distance (grey levels) from the agar that marks its edge
 
 
@@ -30,41 +32,6 @@ class Dish:
             "center": [float(self.center[0]), float(self.center[1])],
             "radius": float(self.radius),
         }
-
-
-def as_plate_image(image: Any) -> np.ndarray:
-    """Validate a plate image and return it as a contiguous HxWx3 BGR ``uint8`` array.
-
-    Grey (HxW or HxWx1) is expanded to BGR, BGRA loses its alpha, other real dtypes are clipped
-    to [0, 255].
-
-    Raises
-    ------
-    ValueError
-        Not an array, empty, smaller than 64x64, a wrong number of channels, a non-numeric
-        dtype, or NaN / infinite values; the message names what is wrong.
-    """
-    if not isinstance(image, np.ndarray):
-        raise ValueError(f"image must be a numpy array, got {type(image).__name__}")
-    if image.size == 0:
-        raise ValueError(f"image is empty (shape {image.shape})")
-    if image.ndim == 2:
-        image = image[..., None]
-    if image.ndim != 3 or image.shape[2] not in (1, 3, 4):
-        raise ValueError(f"image must be HxW, HxWx3 (BGR) or HxWx4, got shape {image.shape}")
-    if min(image.shape[:2]) < 64:
-        raise ValueError(f"image must be at least 64x64 pixels, got shape {image.shape}")
-    if image.dtype != np.uint8:
-        if image.dtype.kind not in "uif" or image.dtype == np.bool_:
-            raise ValueError(f"image dtype must be uint8 or a real number type, got {image.dtype}")
-        if image.dtype.kind == "f" and not np.all(np.isfinite(image)):
-            raise ValueError("image holds NaN or infinite values")
-        image = np.clip(image, 0, 255).astype(np.uint8)
-    if image.shape[2] == 1:
-        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-    elif image.shape[2] == 4:
-        image = np.ascontiguousarray(image[..., :3])
-    return np.ascontiguousarray(image)
 
 
 def find_dish(image: np.ndarray, radius_range: tuple[float, float] = (0.30, 0.50)) -> Dish:
@@ -94,7 +61,7 @@ def find_dish(image: np.ndarray, radius_range: tuple[float, float] = (0.30, 0.50
     ValueError
         If the image is not valid or no dish is found.
     """
-    img = as_plate_image(image)
+    img = as_image(image, color=True, min_side=64)
     guess = hough_dish(img, radius_range)
     if guess is None:
         raise ValueError("no petri dish found in the image; set PlateParams.region to the dish")

@@ -1,8 +1,9 @@
 """Colour Canny edges, ordered edge linking and sub-pixel refinement (section 3.1).
 
 The paper combines Canny's hysteresis with a region growing that "collects all points of the edge
-contour with a known sorting". We get the same ordered chains in one compiled pass over the edge
-pixels (:mod:`labauto.vision.kernels.edges`), without a Python loop over pixels or contours:
+contour with a known sorting". We get the same ordered chains in three steps, written here in
+numpy/OpenCV; the compiled kernel (:mod:`labauto.vision.kernels.edges`) does steps 2-3 and the
+sampling below in one pass over the edge pixels with the same result:
 
 1. ``cv2.Canny(gx, gy, low, high, L2gradient=True)`` on our own colour gradient (eq. 2);
 2. the edge pixels are thinned to minimal 8-connected chains (:func:`thin_edges`: Canny leaves
@@ -28,12 +29,12 @@ the gradient lookup and the refinement in one kernel call.
 from __future__ import annotations
 
 import threading
+from types import ModuleType
 
 import cv2
 import numpy as np
 
 from labauto.vision import kernels
-from labauto.vision.kernels import edges as _kernel
 
 
 def canny_edges(gx: np.ndarray, gy: np.ndarray, low: float, high: float) -> np.ndarray:
@@ -122,7 +123,24 @@ def thin_edges(edges: np.ndarray, max_iter: int = 2) -> np.ndarray:
     """
     binary = (_edge_map(edges) != 0).view(np.uint8)
     padded = cv2.copyMakeBorder(binary, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
-    _kernel.thin(padded, _REMOVABLE_U8, int(max_iter))
+    kernel = kernels.compiled("edges")
+    if kernel is not None:
+        kernel.thin(padded, _REMOVABLE_U8, int(max_iter))
+        return padded
+    ys, xs = np.nonzero(padded)
+    pixel_class = (ys % 2) * 2 + ((ys * padded.shape[1] + xs) % 2)
+    classes = [(ys[pixel_class == c], xs[pixel_class == c]) for c in range(4)]
+    for _ in range(max_iter):
+        changed = False
+        for y, x in classes:
+            code = np.zeros(y.shape[0], np.uint8)
+            for bit, (dy, dx) in enumerate(_NEIGHBOURS):
+                code |= padded[y + dy, x + dx] << bit
+            remove = _REMOVABLE[code] & (padded[y, x] != 0)
+            changed |= bool(remove.any())
+            padded[y[remove], x[remove]] = 0
+        if not changed:
+            break
     return padded
 
 
@@ -149,14 +167,30 @@ def link_edges(
         (K + 1,) int64; chain k is ``points[offsets[k]:offsets[k + 1]]``.
     """
     edges = _edge_map(edges)
-    return _kernel.link(
+    _limits(min_length, max_length)
+    kernel = kernels.compiled("edges")
+    if kernel is None:
+        return _outer_chains(edges, min_length, max_length)
+    return kernel.link(
         edges,
         _work_map(edges.shape),
         _REMOVABLE_U8,
         _THIN_PASSES,
         *_limits(min_length, max_length),
-        workspace=_workspace(),
+        workspace=_workspace(kernel),
     )
+
+
+def _outer_chains(
+    edges: np.ndarray, min_length: int, max_length: int | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Steps 2 and 3 of the module docstring: thin, trace the outer boundaries, chain."""
+    thin = thin_edges(edges, _THIN_PASSES)
+    traces, hierarchy = cv2.findContours(
+        thin, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE, offset=(-1, -1)
+    )
+    outer = [t for t, h in zip(traces, hierarchy[0], strict=True) if h[3] < 0] if traces else []
+    return traces_to_chains(outer, edges.shape[1], min_length, max_length)
 
 
 def edge_contours(
@@ -169,8 +203,8 @@ def edge_contours(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Ordered chains of an edge map with their gradients and (sub-pixel) positions.
 
-    :func:`link_edges`, :func:`gradient_at` and :func:`refine_subpixel` in one kernel call, on
-    :func:`labauto.vision.kernels.threads` threads (the result does not depend on their number).
+    :func:`link_edges`, :func:`gradient_at` and :func:`refine_subpixel` (with the compiled
+    kernel: in one call, on one thread).
 
     Parameters
     ----------
@@ -196,18 +230,25 @@ def edge_contours(
     """
     edges = _edge_map(edges)
     gx, gy = _gradient_pair(gx, gy, edges.shape)
-    return _kernel.link(
-        edges,
-        _work_map(edges.shape),
-        _REMOVABLE_U8,
-        _THIN_PASSES,
-        *_limits(min_length, max_length),
-        gx,
-        gy,
-        bool(subpixel),
-        _workspace(),
-        kernels.threads(),
-    )
+    _limits(min_length, max_length)
+    kernel = kernels.compiled("edges")
+    if kernel is not None:
+        return kernel.link(
+            edges,
+            _work_map(edges.shape),
+            _REMOVABLE_U8,
+            _THIN_PASSES,
+            *_limits(min_length, max_length),
+            gx,
+            gy,
+            bool(subpixel),
+            _workspace(kernel),
+        )
+    pixels, offsets = _outer_chains(edges, min_length, max_length)
+    points, gradients = _sample(pixels, gx, gy, subpixel)
+    first, last = pixels[offsets[:-1]], pixels[np.maximum(offsets[1:] - 1, 0)]
+    closed = (np.diff(offsets) > 2) & np.all(np.abs(first - last) <= 1, axis=1)
+    return points, offsets, gradients, closed
 
 
 def traces_to_chains(
@@ -236,13 +277,38 @@ def traces_to_chains(
     points, offsets
         As :func:`link_edges`.
     """
+    low, high = _limits(min_length, max_length)
     if not traces:
         return np.empty((0, 2), np.int32), np.zeros(1, np.int64)
     lengths = np.fromiter((len(t) for t in traces), np.int64, len(traces))
     pts = np.ascontiguousarray(np.concatenate(traces).reshape(-1, 2), np.int32)
     if width < 1:
         raise ValueError(f"width must be >= 1, got {width}")
-    return _kernel.chains_from_traces(pts, lengths, int(width), *_limits(min_length, max_length))
+    kernel = kernels.compiled("edges")
+    if kernel is not None:
+        return kernel.chains_from_traces(pts, lengths, int(width), low, high)
+    if pts.shape[0] and (pts.min() < 0 or pts[:, 0].max() >= width):
+        raise ValueError("chains_from_traces: points must lie in 0 <= x < width, 0 <= y")
+    linear = pts[:, 1].astype(np.int64) * width + pts[:, 0]
+    seen = np.zeros(int(linear.max()) + 1 if linear.size else 0, bool)
+    chains, starts = [], np.cumsum(lengths) - lengths
+    for start, n in zip(starts.tolist(), lengths.tolist(), strict=True):
+        lin = linear[start : start + n]
+        rotation = 0
+        if n > 2 and np.unique(lin[~seen[lin]]).shape[0] < 0.75 * n:  # out and back
+            turns = np.flatnonzero(np.roll(lin, 1) == np.roll(lin, -1))
+            rotation = int(turns[0]) if turns.shape[0] else 0
+        order = np.roll(np.arange(n), -rotation)
+        _, first = np.unique(lin[order], return_index=True)  # each pixel's first visit
+        keep = order[np.sort(first)]
+        keep = keep[~seen[lin[keep]]]
+        seen[lin] = True
+        if keep.shape[0] >= low and (high < 0 or keep.shape[0] <= high):
+            chains.append(pts[start + keep])
+    if not chains:
+        return np.empty((0, 2), np.int32), np.zeros(1, np.int64)
+    offsets = np.concatenate(([0], np.cumsum([c.shape[0] for c in chains]))).astype(np.int64)
+    return np.concatenate(chains), offsets
 
 
 def gradient_at(gx: np.ndarray, gy: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -286,10 +352,35 @@ def _sample(
     if pts.shape[0] and (pts.min() < 0 or pts[:, 0].max() >= w or pts[:, 1].max() >= h):
         raise ValueError(f"points must lie inside the {w}x{h} gradient image")
     pts = np.ascontiguousarray(pts, np.int32)
-    out_points = np.empty((pts.shape[0], 2), np.float64)
-    out_gradients = np.empty((pts.shape[0], 2), np.float32)
-    _kernel.sample(pts, gx, gy, bool(subpixel), out_points, out_gradients)
-    return out_points, out_gradients
+    kernel = kernels.compiled("edges")
+    if kernel is not None:
+        out_points = np.empty((pts.shape[0], 2), np.float64)
+        out_gradients = np.empty((pts.shape[0], 2), np.float32)
+        kernel.sample(pts, gx, gy, bool(subpixel), out_points, out_gradients)
+        return out_points, out_gradients
+    x, y = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
+    a, b = gx[y, x], gy[y, x]
+    gradients = np.column_stack((a, b)).astype(np.float32)
+    points = pts.astype(np.float64)
+    if not subpixel:
+        return points, gradients
+    # the neighbours along the axis closer to the gradient (x on ties); at the border none
+    along_x = np.abs(a.astype(np.int32)) >= np.abs(b.astype(np.int32))
+    inner = np.where(along_x, (x >= 1) & (x < w - 1), (y >= 1) & (y < h - 1))
+    sx, sy = (along_x & inner).astype(np.intp), (~along_x & inner).astype(np.intp)
+
+    def magnitude(xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+        gxs, gys = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
+        return np.sqrt(gxs * gxs + gys * gys).astype(np.float32)
+
+    m0, m_minus, m_plus = magnitude(x, y), magnitude(x - sx, y - sy), magnitude(x + sx, y + sy)
+    denom = (m_minus - np.float32(2.0) * m0) + m_plus
+    with np.errstate(divide="ignore", invalid="ignore"):
+        offset = (np.float32(0.5) * (m_minus - m_plus)) / denom
+    offset = np.where(denom < 0, np.clip(offset, np.float32(-0.5), np.float32(0.5)), 0)
+    points[:, 0] += np.where(along_x, offset, 0).astype(np.float64)
+    points[:, 1] += np.where(along_x, 0, offset).astype(np.float64)
+    return points, gradients
 
 
 def _edge_map(edges: np.ndarray) -> np.ndarray:
@@ -327,11 +418,11 @@ def _limits(min_length: int, max_length: int | None) -> tuple[int, int]:
 _WORK = threading.local()
 
 
-def _workspace() -> _kernel.Workspace:
+def _workspace(kernel: ModuleType) -> object:
     """This thread's buffers for the linker (kept between calls: see ``kernels.edges``)."""
     workspace = getattr(_WORK, "workspace", None)
     if workspace is None:
-        workspace = _WORK.workspace = _kernel.Workspace()
+        workspace = _WORK.workspace = kernel.Workspace()
     return workspace
 
 

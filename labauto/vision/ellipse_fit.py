@@ -60,8 +60,10 @@ centre included) the root is ``s = -b^2``, a pole of F, and the contact point ha
 Other quadrants follow by symmetry.
 
 The loops (moments, contact points, normal equations, the whole Levenberg-Marquardt of every
-contour) are compiled: :mod:`labauto.vision.kernels.ellipse_fit`, one call per batch with the
-contours shared among threads; the single-contour functions are batches of one.
+contour) are written out in numpy in :mod:`labauto.vision.ellipse_plain`, the reference; the
+compiled kernel :mod:`labauto.vision.kernels.ellipse_fit` runs them in one call per batch with
+the contours shared among threads, with the same results to rounding. The single-contour
+functions are batches of one.
 
 Coordinates (DESIGN.md): pixels, x right, y down; :class:`~labauto.vision.ellipse.Ellipse`
 angles in degrees from +x toward +y, normalised so ``a >= b`` and angle in [0, 180).
@@ -71,12 +73,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from types import ModuleType
 
 import numpy as np
 
-from labauto.vision import kernels
+from labauto.vision import ellipse_plain, kernels
 from labauto.vision.ellipse import Ellipse
-from labauto.vision.kernels import ellipse_fit as _kernel
 
 _OK, _TOO_FEW, _DEGENERATE, _NOT_ELLIPSE, _BAD_INITIAL = 0, 1, 2, 3, 4
 _ROBUST_METHODS = ("ransac", "bootstrap")
@@ -211,21 +213,18 @@ def _run(
     rms = np.zeros(k)
     iterations = np.zeros(k, dtype=np.int32)
     converged = np.zeros(k, dtype=np.uint8)
-    _kernel.fit_ellipses(
-        pts,
-        off,
-        index,
-        params,
-        status,
-        rms,
-        iterations,
-        converged,
-        seed,
-        min(max_iter, _INT_MAX),
-        tol,
-        kernels.threads(),
-    )
+    arrays = (pts, off, index, params, status, rms, iterations, converged)
+    kernel = kernels.compiled("ellipse_fit")
+    if kernel is None:
+        ellipse_plain.fit_ellipses(*arrays, seed, min(max_iter, _INT_MAX), tol)
+    else:
+        kernel.fit_ellipses(*arrays, seed, min(max_iter, _INT_MAX), tol, kernels.threads())
     return status, rms, iterations, converged
+
+
+def _fits() -> ModuleType:
+    """The compiled ellipse kernel when it runs, else its plain twin (the same functions)."""
+    return kernels.compiled("ellipse_fit") or ellipse_plain
 
 
 def _conic_to_params(conic: np.ndarray) -> np.ndarray:
@@ -235,7 +234,7 @@ def _conic_to_params(conic: np.ndarray) -> np.ndarray:
     when it is no real ellipse.
     """
     out = np.empty((1, 5))
-    _kernel.conics_to_params(
+    _fits().conics_to_params(
         np.ascontiguousarray(conic, dtype=np.float64).reshape(1, 6), out, np.empty(1, np.uint8)
     )
     return out[0]
@@ -477,7 +476,7 @@ def contact_points(
         raise ValueError(f"semi-axes must be > 0, got a={a!r}, b={b!r}")
     u, v = np.broadcast_arrays(np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64))
     cu, cv = np.empty(u.shape), np.empty(u.shape)
-    _kernel.contact_points(
+    _fits().contact_points(
         np.ascontiguousarray(u).ravel(),
         np.ascontiguousarray(v).ravel(),
         float(a),
@@ -633,7 +632,7 @@ def orthogonal_distances(points: np.ndarray, ellipse: Ellipse) -> np.ndarray:
     """
     pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
     out = np.empty(len(pts))
-    _kernel.orthogonal_distances(
+    _fits().orthogonal_distances(
         pts, *ellipse.center, *ellipse.axes, math.radians(ellipse.angle), out
     )
     return out

@@ -1,4 +1,4 @@
-"""Colour image gradient (eq. 2 of Teutsch et al.) and image validation.
+"""Colour image gradient (eq. 2 of Teutsch et al.).
 
 The paper measures colour edge strength as the sum of the squared channel gradients (eq. 2) and
 notes that directions in different channels can disagree. We take, per pixel, the gradient
@@ -11,12 +11,13 @@ is within a factor sqrt(3) of the eq. 2 magnitude; thresholds are given on this 
 
 Derivatives are the 3x3 Sobel operator after an optional Gaussian blur (``cv2.GaussianBlur`` on
 all channels), in integer arithmetic on 8-bit data, so the result is int16 and can go straight
-into ``cv2.Canny(dx, dy, ...)``. For a colour image the three channel gradients and the choice
-among them are one compiled pass (:mod:`labauto.vision.kernels.gradient`); each channel's
-derivatives equal ``cv2.spatialGradient``'s. The 3x3 blur (``blur_sigma`` below 0.75, the default
-0.7 included) is done in that same pass, bit for bit as ``cv2.GaussianBlur`` does it (see
-:func:`gaussian_3x3_tap`), without writing the blurred image to memory; larger blurs and grey
-images call OpenCV.
+into ``cv2.Canny(dx, dy, ...)``. The plain path (:func:`strongest_channel_gradient`) is
+``cv2.GaussianBlur``, ``cv2.spatialGradient`` per channel and the per-pixel choice in numpy.
+With the compiled kernel (:mod:`labauto.vision.kernels.gradient`) the three channel gradients
+and the choice among them are one pass with the same result; the 3x3 blur (``blur_sigma`` below
+0.75, the default 0.7 included) is done in that same pass, bit for bit as ``cv2.GaussianBlur``
+does it (see :func:`gaussian_3x3_tap`), without writing the blurred image to memory; larger
+blurs and grey images call OpenCV.
 """
 
 from __future__ import annotations
@@ -27,64 +28,6 @@ import cv2
 import numpy as np
 
 from labauto.vision import kernels
-from labauto.vision.kernels.gradient import max_channel_sobel
-
-
-def as_uint8_image(image: object, name: str = "image") -> np.ndarray:
-    """Validate an image and return it as a C-contiguous uint8 HxW or HxWx3 array.
-
-    Parameters
-    ----------
-    image : array-like
-        HxW grey or HxWx3 colour (BGR) image; HxWx1 is taken as grey. uint8 is used as is;
-        other integer types must lie in 0-255; float images are taken on a 0-255 scale when
-        their maximum exceeds 1.0, else on a 0-1 scale (scaled by 255); both are rounded and
-        clipped to 0-255.
-    name : str
-        Name used in error messages.
-
-    Raises
-    ------
-    ValueError
-        If the image is not a numpy array, is empty, has the wrong number of dimensions or
-        channels, has an unsupported dtype, or contains NaN/inf.
-    """
-    if not isinstance(image, np.ndarray):
-        raise ValueError(f"{name} must be a numpy array, got {type(image).__name__}")
-    if image.size == 0:
-        raise ValueError(f"{name} is empty (shape {image.shape})")
-    if image.ndim == 3 and image.shape[2] == 1:
-        image = image[..., 0]
-    if image.ndim not in (2, 3):
-        raise ValueError(
-            f"{name} must be HxW (grey) or HxWx3 (BGR), got {image.ndim} dimension(s) "
-            f"with shape {image.shape}"
-        )
-    if image.ndim == 3 and image.shape[2] != 3:
-        raise ValueError(
-            f"{name} must have 1 or 3 channels, got {image.shape[2]} (shape {image.shape})"
-        )
-    if image.shape[0] < 3 or image.shape[1] < 3:
-        raise ValueError(f"{name} must be at least 3x3 pixels, got shape {image.shape}")
-    dtype = image.dtype
-    if dtype == np.uint8:
-        return np.ascontiguousarray(image)
-    if dtype == np.bool_ or not (
-        np.issubdtype(dtype, np.integer) or np.issubdtype(dtype, np.floating)
-    ):
-        raise ValueError(f"{name} has unsupported dtype {dtype}; use uint8 or float")
-    if np.issubdtype(dtype, np.integer):
-        lo, hi = int(image.min()), int(image.max())
-        if lo < 0 or hi > 255:
-            raise ValueError(
-                f"{name} has dtype {dtype} with values {lo}..{hi}; integer images must lie "
-                "in 0..255 (convert 16-bit images first)"
-            )
-        return np.ascontiguousarray(image, dtype=np.uint8)
-    if not np.all(np.isfinite(image)):
-        raise ValueError(f"{name} contains NaN or infinite values")
-    scale = 255.0 if float(image.max()) <= 1.0 else 1.0
-    return np.clip(np.rint(image * scale), 0, 255).astype(np.uint8)
 
 
 def _blur_size(blur_sigma: float) -> int:
@@ -136,7 +79,7 @@ def color_gradient(image: np.ndarray, blur_sigma: float = 0.7) -> tuple[np.ndarr
     Parameters
     ----------
     image : np.ndarray
-        uint8 HxW or HxWx3 image (see :func:`as_uint8_image`).
+        uint8 HxW or HxWx3 image (see :func:`labauto.vision.image.as_image`).
     blur_sigma : float
         Standard deviation (pixels) of a Gaussian blur applied to each channel first, with a
         kernel truncated at about 2 sigma (3x3 below sigma 0.75, 5x5 up to 1.25); 0 for none.
@@ -152,8 +95,9 @@ def color_gradient(image: np.ndarray, blur_sigma: float = 0.7) -> tuple[np.ndarr
     """
     if image.dtype != np.uint8 or image.ndim not in (2, 3):
         raise ValueError(f"color_gradient needs a uint8 HxW or HxWx3 image, got {image.dtype}")
-    if image.ndim == 2:
-        return cv2.spatialGradient(_blur(image, blur_sigma))
+    kernel = kernels.compiled("gradient")
+    if image.ndim == 2 or kernel is None:
+        return strongest_channel_gradient(_blur(image, blur_sigma))
     if blur_sigma <= 0:
         tap = 0  # no blur
     elif _blur_size(blur_sigma) == 3:
@@ -163,5 +107,36 @@ def color_gradient(image: np.ndarray, blur_sigma: float = 0.7) -> tuple[np.ndarr
     gx = np.empty(image.shape[:2], np.int16)
     gy = np.empty(image.shape[:2], np.int16)
     # one pass (blur, derivatives, choice of channel), rows in parallel
-    max_channel_sobel(np.ascontiguousarray(image), gx, gy, kernels.threads(), tap)
+    kernel.max_channel_sobel(np.ascontiguousarray(image), gx, gy, kernels.threads(), tap)
+    return gx, gy
+
+
+def strongest_channel_gradient(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The 3x3 Sobel gradient of the channel with the largest ``|gx| + |gy|``, per pixel.
+
+    ``cv2.spatialGradient`` of each channel (the image mirrored at its border without repeating
+    the edge pixel), then per pixel the first channel of largest L1 norm. A grey image is its
+    own strongest channel.
+
+    Parameters
+    ----------
+    image : np.ndarray
+        uint8 HxW or HxWx3.
+
+    Returns
+    -------
+    gx, gy : np.ndarray
+        int16 HxW.
+    """
+    if image.ndim == 2:
+        return cv2.spatialGradient(image)
+    channels = cv2.split(image)
+    gx, gy = cv2.spatialGradient(channels[0])
+    strength = cv2.add(np.abs(gx), np.abs(gy))  # at most 2040: no overflow in int16
+    for channel in channels[1:]:
+        cx, cy = cv2.spatialGradient(channel)
+        norm = cv2.add(np.abs(cx), np.abs(cy))
+        stronger = cv2.compare(norm, strength, cv2.CMP_GT)  # ties keep the earlier channel
+        for chosen, candidate in ((gx, cx), (gy, cy), (strength, norm)):
+            cv2.copyTo(candidate, stronger, chosen)
     return gx, gy

@@ -25,19 +25,20 @@ gives the axis ratio ``b/a`` exactly) and every other harmonic is deviation from
 radius), which would hide a small deformation; the classifier therefore measures ellipse-ness in
 ``rho`` and triangles, squares and stars in ``r``.
 
-Implementation: the per-edge integrals are summed per contour by the compiled shape kernel
-(:func:`labauto.vision.kernels.shape.measure_contours`, via
-:func:`labauto.vision.descriptors.measure_contours`), in the same call as the descriptors. There
-the factor ``e^{in phi}`` is folded into per-vertex powers: with ``w = e^{i theta}`` at the edge's
-ends, ``e^{in phi} int e^{inu} du = (w1^n - w0^n) / (in)``, so each vertex's powers serve both of
-its edges, and the ``r^-2`` terms are gathered per harmonic: ``sum_edges c (w1^n - w0^n)``
-(``c``: an edge's coefficient ``1 / (2 d^2)`` or ``e^{2i phi} / (4 d^2)``) for every ``n``, a few
-multiply-adds per edge and harmonic instead of three complex products. The kernel goes
-harmonic by harmonic, each a vectorised pass over all vertices and edges. (Summation order is a
-rounding matter only; where an edge's line passes close to the centre, ``1 / d^2`` is large and
-the ``r^-2`` coefficients of any summation order carry rounding of that size: ~1e-10 of the 0th
-for a line 0.004 px from the centre.) :func:`classify_shapes` labels all contours of an image in
-one kernel call; the single-contour functions are a batch of one.
+Implementation: the per-edge integrals are summed per contour in the same call as the descriptors
+(:func:`labauto.vision.descriptors.measure_contours`): written out in numpy in
+:mod:`labauto.vision.shape_plain`, and by the compiled shape kernel
+(:func:`labauto.vision.kernels.shape.measure_contours`) when it runs. The kernel folds the factor
+``e^{in phi}`` into per-vertex powers: with ``w = e^{i theta}`` at the edge's ends, ``e^{in phi} int
+e^{inu} du = (w1^n - w0^n) / (in)``, so each vertex's powers serve both of its edges, and the
+``r^-2`` terms are gathered per harmonic: ``sum_edges c (w1^n - w0^n)`` (``c``: an edge's
+coefficient ``1 / (2 d^2)`` or ``e^{2i phi} / (4 d^2)``) for every ``n``, a few multiply-adds per
+edge and harmonic instead of three complex products. The kernel goes harmonic by harmonic, each a
+vectorised pass over all vertices and edges. (Summation order is a rounding matter only; where an
+edge's line passes close to the centre, ``1 / d^2`` is large and the ``r^-2`` coefficients of any
+summation order carry rounding of that size: ~1e-10 of the 0th for a line 0.004 px from the centre.)
+:func:`classify_shapes` labels all contours of an image in one call; the single-contour functions
+are a batch of one.
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ from labauto.vision.descriptors import (
     raise_for_status,
     shape_descriptors,
 )
-from labauto.vision.kernels import shape as _kernel
+from labauto.vision.shape_plain import OK, SERIES_NO_AREA, SERIES_NO_WINDING, SERIES_OK
 
 SHAPE_LABELS = ("circle", "ellipse", "des", "triangle", "rectangle", "line", "other")
 
@@ -377,9 +378,9 @@ def _polar_series(
         pts, np.array([0, len(pts)], np.int64), centroids=centres, n_r=int(n_r), n_rho=int(n_rho)
     )
     status = int(measured.series_status[0])
-    if status == _kernel.SERIES_NO_AREA:
+    if status == SERIES_NO_AREA:
         raise ValueError("points enclose no area; polar harmonics need a closed shape")
-    if status == _kernel.SERIES_NO_WINDING:
+    if status == SERIES_NO_WINDING:
         cx, cy = measured.values["centre_x"][0], measured.values["centre_y"][0]
         raise ValueError(
             f"the contour does not wind around the centroid ({cx:.6g}, {cy:.6g}); "
@@ -472,7 +473,7 @@ def _classify(
         n_rho=8,
     )
     v = measured.values
-    valid = (measured.status == _kernel.OK) & finite
+    valid = (measured.status == OK) & finite
     line = v["elongation"] >= th.line_elongation
     rect = v["rectangularity"]
     harmonics, axis_ratio, deviation = _ellipse_measures(measured.r, measured.rho)
@@ -481,7 +482,7 @@ def _classify(
     conditions = [
         line,
         ~inside
-        | (measured.series_status != _kernel.SERIES_OK)  # no centre, or it is outside
+        | (measured.series_status != SERIES_OK)  # no centre, or it is outside
         | (v["star_shapedness"] < th.min_star_shapedness),
         rect >= th.rectangle_min_rectangularity,
         ellipse_like & (axis_ratio >= th.circle_min_axis_ratio),

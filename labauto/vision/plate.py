@@ -77,7 +77,8 @@ import cv2
 import numpy as np
 
 from labauto.vision.detector import DetectorParams, detect
-from labauto.vision.dish import Dish, as_plate_image, find_dish
+from labauto.vision.dish import Dish, find_dish
+from labauto.vision.image import as_image
 from labauto.vision.plate_background import (
     adaptive_threshold,
     deviation,
@@ -882,7 +883,7 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     """
     t0 = time.perf_counter()
     params = PlateParams() if params is None else params
-    img = as_plate_image(image)
+    img = as_image(image, color=True, min_side=64)
     h, w = img.shape[:2]
     stage_ms: dict[str, float] = {}
     t_stage = t0

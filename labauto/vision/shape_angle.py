@@ -40,10 +40,11 @@ margin for rasterisation and noise and rejects lines and ragged artefacts. Like 
 it does not reject squares, triangles or 5-point stars whose centroid is inside (D_alpha 27-52);
 the harmonic shape label tells those apart (the paper: "the square itself seems to be a problem").
 
-The loops over points are one compiled call per image for all contours
-(:mod:`labauto.vision.kernels.shape_angle`: plain sums in point order, quickselect for the
-medians). It evaluates alpha_i as ``atan2(|g_i x m_i|, |g_i . m_i|)``, the same angle, which
-unlike ``arccos`` stays accurate to rounding near 0 degrees and needs no norms.
+Implementation: numpy over all contours of an image at once (per-contour sums by
+``np.add.reduceat``, medians by one sort of all angles grouped by contour); no compiled kernel,
+because none saved a real share of a plate's or an image's time (``benchmarks/bench_kernels.py``
+in the issue 16 note). alpha_i is evaluated as ``atan2(|g_i x m_i|, |g_i . m_i|)``, the same
+angle, which unlike ``arccos`` stays accurate to rounding near 0 degrees and needs no norms.
 """
 
 from __future__ import annotations
@@ -51,9 +52,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from labauto.vision import kernels
-from labauto.vision.kernels import shape_angle as _kernel
 
 #: An open contour's chord-closed polygon gives the centroid when its area exceeds this times
 #: the mean squared distance of the points from their mean; otherwise the points' mean does.
@@ -202,16 +200,75 @@ def gap_fractions(
 def _geometry(
     points: np.ndarray, offsets: np.ndarray, closed: np.ndarray | None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centroids (K, 2), areas (K,) and gap fractions (K,), one kernel call."""
+    """Centroids (K, 2), areas (K,) and gap fractions (K,) of the contours.
+
+    Per contour, about its first point ``p0`` (for precision): the shoelace sums of the polygon
+    through the points (the closing edge back to ``p0`` adds 0), the points' sums for their
+    mean and spread, and, for an open contour, its length and the chord between its ends.
+    """
     points = _points(points)
     offsets = _offsets(offsets)
-    flags = _closed(closed, points, offsets)
-    k = offsets.shape[0] - 1
-    centroid, area, gap = np.empty((k, 2)), np.empty(k), np.empty(k)
-    _kernel.polygon_centroids(
-        points, offsets, flags, OPEN_MIN_AREA_RATIO, centroid, area, gap, kernels.threads_for(k)
-    )
-    return centroid, area, gap
+    _check_offsets(offsets, points.shape[0])
+    flags = _closed(closed, points, offsets).view(bool)
+    if not np.all(np.isfinite(points)):
+        raise ValueError("points must be finite")
+    start, n = offsets[:-1], np.diff(offsets)
+    origin = points[start]
+    rel = points - np.repeat(origin, n, axis=0)
+    x, y = rel[:, 0], rel[:, 1]
+    # edge i -> i + 1 within a contour (the last point of each contour starts no edge)
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    last = offsets[1:] - 1
+    xn[last], yn[last] = x[last], y[last]
+    cross = x * yn - xn * y
+    cross[last] = 0.0
+    step = np.hypot(xn - x, yn - y)
+
+    def per_contour(values: np.ndarray) -> np.ndarray:
+        return np.add.reduceat(values, start)
+
+    twice_area = per_contour(cross)
+    moment_x, moment_y = per_contour((x + xn) * cross), per_contour((y + yn) * cross)
+    sx, sy, ss = per_contour(x), per_contour(y), per_contour(x * x + y * y)
+    spread = (ss - (sx * sx + sy * sy) / n) / n  # mean squared distance from the mean
+    area = np.abs(twice_area) / 2.0
+    # an open contour: the chord-closed polygon if it encloses a real area (a disk has
+    # area / spread = pi, a straight line 0), else the points' mean
+    min_ratio = np.where(flags, 1e-6, OPEN_MIN_AREA_RATIO)
+    polygonal = area > min_ratio * spread
+    with np.errstate(divide="ignore", invalid="ignore"):
+        centroid = np.where(
+            polygonal[:, None],
+            np.column_stack((moment_x, moment_y)) / (3.0 * twice_area[:, None]),
+            np.column_stack((sx, sy)) / n[:, None],
+        )
+        chord = np.hypot(x[last], y[last])
+        total = per_contour(step) + chord
+        gap = np.where(~flags & (total > 0), chord / total, 0.0)
+    return origin + centroid, area, gap
+
+
+def _check_offsets(offsets: np.ndarray, n_points: int) -> None:
+    if offsets[0] != 0 or offsets[-1] != n_points:
+        raise ValueError("offsets must start at 0 and end at len(points)")
+    if np.any(np.diff(offsets) < 1):
+        raise ValueError("every contour needs at least one point")
+
+
+def _crossings(query: np.ndarray, points: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """(K,) bool even-odd test of query point k against polygon k (last point joins first)."""
+    n = np.diff(offsets)
+    q = np.repeat(query, n, axis=0)
+    x0, y0 = points[:, 0], points[:, 1]
+    # the edge into point i comes from point i - 1 (from the last point for a contour's first)
+    before = np.arange(points.shape[0]) - 1
+    before[offsets[:-1]] = offsets[1:] - 1
+    xp, yp = x0[before], y0[before]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        hits = ((yp > q[:, 1]) != (y0 > q[:, 1])) & (
+            q[:, 0] < xp + (q[:, 1] - yp) * (x0 - xp) / (y0 - yp)
+        )
+    return np.add.reduceat(hits.astype(np.int64), offsets[:-1]) % 2 == 1
 
 
 def points_in_polygons(query: np.ndarray, points: np.ndarray, offsets: np.ndarray) -> np.ndarray:
@@ -235,11 +292,10 @@ def points_in_polygons(query: np.ndarray, points: np.ndarray, offsets: np.ndarra
     points = _points(points)
     offsets = _offsets(offsets)
     query = _points(query, "query")
-    inside = np.empty(offsets.shape[0] - 1, np.uint8)
-    _kernel.points_in_polygons(
-        query, points, offsets, inside, kernels.threads_for(offsets.shape[0] - 1)
-    )
-    return inside.view(bool)
+    _check_offsets(offsets, points.shape[0])
+    if query.shape[0] != offsets.shape[0] - 1:
+        raise ValueError("query and inside must have one entry per contour")
+    return _crossings(query, points, offsets)
 
 
 def shape_angles(
@@ -282,28 +338,41 @@ def shape_angles(
             f"points and gradients must both be (N, 2), got {points.shape} and {gradients.shape}"
         )
     offsets = _offsets(offsets)
-    flags = _closed(closed, points, offsets)
-    k = offsets.shape[0] - 1
-    centroid = np.empty((k, 2))
-    mean, median, area, gap = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
-    inside = np.empty(k, np.uint8)
-    scratch = np.empty(points.shape[0])
-    _kernel.shape_angles(
-        points,
-        gradients,
-        offsets,
-        flags,
-        OPEN_MIN_AREA_RATIO,
-        centroid,
-        mean,
-        median,
-        inside,
-        area,
-        gap,
-        scratch,
-        kernels.threads_for(k),
-    )
-    return ShapeAngles(centroid, mean, median, inside.view(bool), area, gap)
+    _check_offsets(offsets, points.shape[0])
+    if not np.all(np.isfinite(gradients)):
+        raise ValueError("points and gradients must be finite")
+    centroid, area, gap = _geometry(points, offsets, closed)
+    alpha = deviation_angles(points, gradients, np.repeat(centroid, np.diff(offsets), axis=0))
+    n = np.diff(offsets)
+    mean = np.add.reduceat(alpha, offsets[:-1]) / n
+    inside = _crossings(centroid, points, offsets)
+    return ShapeAngles(centroid, mean, _medians(alpha, offsets), inside, area, gap)
+
+
+def deviation_angles(points: np.ndarray, gradients: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """Eq. 3 per point: the angle (degrees, in [0, 90]) between ``g_i`` and ``m_i = c - p_i``.
+
+    ``atan2(|g x m|, |g . m|)``; 90 where ``g`` or ``m`` is zero (no direction).
+    """
+    m = centre - points
+    gx, gy = gradients[:, 0].astype(np.float64), gradients[:, 1].astype(np.float64)
+    dot = np.abs(gx * m[:, 0] + gy * m[:, 1])
+    cross = np.abs(gx * m[:, 1] - gy * m[:, 0])
+    alpha = np.degrees(np.arctan2(cross, dot))
+    alpha[(dot == 0.0) & (cross == 0.0)] = 90.0
+    return alpha
+
+
+def _medians(values: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Median of each contour's values (mean of the two middle ones for an even count)."""
+    n = np.diff(offsets)
+    small = np.int16 if n.shape[0] < 2**15 else np.int64  # 16 bits: a radix sort below
+    contour = np.repeat(np.arange(n.shape[0], dtype=small), n)
+    by_value = np.argsort(values)
+    ordered = values[by_value[np.argsort(contour[by_value], kind="stable")]]
+    low = offsets[:-1] + (n - 1) // 2
+    high = offsets[:-1] + n // 2
+    return 0.5 * (ordered[low] + ordered[high])
 
 
 def shape_angle(

@@ -54,9 +54,7 @@ def upgrade() -> None:
         batch.add_column(sa.Column("lease_token", sa.String(length=64), nullable=True))
         batch.add_column(sa.Column("lease_pid", sa.Integer(), nullable=True))
         batch.add_column(sa.Column("lease_host", sa.String(length=255), nullable=True))
-        batch.add_column(
-            sa.Column("lease_heartbeat_at", sa.DateTime(timezone=True), nullable=True)
-        )
+        batch.add_column(sa.Column("lease_heartbeat_at", sa.DateTime(timezone=True), nullable=True))
     with op.batch_alter_table("images") as batch:
         batch.add_column(sa.Column("position", sa.Integer(), nullable=True))
         batch.drop_constraint(op.f("uq_images_run_id_sha256"), type_="unique")

@@ -6,7 +6,13 @@ import cv2
 import numpy as np
 import pytest
 
-from labauto.store import InvalidValue, Store, colony_rows, detection_rows
+from labauto.store import (
+    InvalidValue,
+    Store,
+    colony_rows,
+    detection_rows,
+    plate_detection_rows,
+)
 
 DETECTION_JSON = {
     "width": 300,
@@ -92,6 +98,24 @@ def test_colony_json_round_trip_linked_to_detections(store: Store, scene):
     assert first.contour == PLATE_JSON["colonies"][0]["contour"]
     assert (second.klass, second.estimated_count, second.mix_score) == ("merged", 2, 0.05)
     assert second.detection_id is None
+
+
+def test_plate_colonies_become_detections_by_the_same_rows(store: Store, scene):
+    rows = plate_detection_rows(PLATE_JSON, "plate:canny")
+    store.add_detections(scene.run_id, scene.image_id, rows)
+    first, second = store.detections(scene.image_id)
+    assert (first.object_index, first.method, first.centroid_x, first.n_points) == (
+        0, "plate:canny", 80.0, 3,
+    )  # fmt: skip
+    assert (first.is_des, first.closed, first.area_px, first.d_alpha_median) == (
+        True, True, 3200.0, 4.1,
+    )  # fmt: skip
+    assert not second.is_des and second.n_points == 2
+    # what the plate analysis does not measure is not made up
+    assert first.centroid_inside is None and second.centroid_inside is None
+    assert first.d_alpha_mean is None and first.shape is None and first.ellipse_a is None
+    with pytest.raises(InvalidValue, match="object 1: missing 'id'"):
+        plate_detection_rows({"colonies": [PLATE_JSON["colonies"][0], {"centroid": [1, 2]}]}, "p")
 
 
 @pytest.mark.parametrize(

@@ -15,8 +15,6 @@ from labauto.synthetic.shapes import make_scene
 from labauto.vision import kernels
 from labauto.vision.contours import ends_adjacent
 from labauto.vision.edges import (
-    _NEIGHBOURS,
-    _REMOVABLE,
     _work_map,
     canny_edges,
     edge_contours,
@@ -30,22 +28,9 @@ from labauto.vision.gradient import color_gradient
 
 
 def _thin_reference(edges: np.ndarray, max_iter: int = 2) -> np.ndarray:
-    padded = np.pad((edges != 0).astype(np.uint8), 1)
-    ys, xs = np.nonzero(padded)
-    cls = (ys % 2) * 2 + ((ys * padded.shape[1] + xs) % 2)
-    for _ in range(max_iter):
-        changed = False
-        for c in range(4):
-            y, x = ys[cls == c], xs[cls == c]
-            code = np.zeros(y.shape[0], np.uint8)
-            for bit, (dy, dx) in enumerate(_NEIGHBOURS):
-                code |= padded[y + dy, x + dx] << bit
-            remove = _REMOVABLE[code] & (padded[y, x] != 0)
-            changed |= bool(remove.any())
-            padded[y[remove], x[remove]] = 0
-        if not changed:
-            break
-    return padded
+    """The package's plain path (every pixel of a class decided in every pass, numpy)."""
+    with kernels.using("plain"):
+        return thin_edges(edges, max_iter)
 
 
 def _chains_reference(

@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
+from labauto.vision import ellipse_plain
 from labauto.vision.ellipse import Ellipse
 from labauto.vision.ellipse_fit import (
     EllipseFit,
@@ -396,53 +397,11 @@ def ref_contact(
 def ref_geometric(
     pts: np.ndarray, start: Ellipse, max_iter: int = 50, tol: float = 1e-9
 ) -> tuple[Ellipse, float, int, bool]:
-    """The documented Levenberg-Marquardt (numpy normal equations, plain contact points)."""
-    p = np.array([*start.center, *start.axes, math.radians(start.angle)])
-
-    def evaluate(p: np.ndarray, guess: np.ndarray | None) -> tuple:
-        xc, yc, a, b, t = p
-        c, s = math.cos(t), math.sin(t)
-        dx, dy = pts[:, 0] - xc, pts[:, 1] - yc
-        u, v = c * dx + s * dy, c * dy - s * dx
-        fu, fv, roots = ref_contact(u, v, a, b, guess)
-        nu, nv = fu / a**2, fv / b**2
-        norm = np.hypot(nu, nv)
-        nu, nv = nu / norm, nv / norm
-        d = nu * (u - fu) + nv * (v - fv)
-        jac = np.column_stack(
-            (s * nv - c * nu, -(s * nu + c * nv), -nu * fu / a, -nv * fv / b, nu * fv - nv * fu)
-        )
-        return d, jac, roots
-
-    d, jac, roots = evaluate(p, None)
-    cost = float(d @ d)
-    lam, iterations, converged, active = 0.0, 0, False, max_iter > 0
-    while active:
-        iterations += 1
-        hess = jac.T @ jac
-        diag = np.diag(hess).copy()
-        hess[np.diag_indices(5)] += lam * diag + 1e-12 * diag.sum()
-        step = -np.linalg.solve(hess, jac.T @ d)
-        size = max(p[2], p[3], 1.0)
-        step_px = math.sqrt(float(step[:4] @ step[:4]) + (size * step[4]) ** 2)
-        trial = p + step
-        cost_t = math.inf
-        if np.isfinite(trial).all() and trial[2] > 0 and trial[3] > 0:
-            d_t, jac_t, roots_t = evaluate(trial, roots)
-            cost_t = float(d_t @ d_t)
-        small_step = step_px <= tol * size
-        accept = cost_t <= cost
-        small_gain = accept and lam == 0 and cost - cost_t <= tol * cost
-        if accept:
-            p, cost, d, jac, roots = trial, cost_t, d_t, jac_t, roots_t
-            lam = 0.0 if lam <= 1e-6 else lam / 10
-        elif not small_step:
-            lam = 1e-3 if lam == 0 else lam * 10
-        done = (accept and (small_step or small_gain)) or (not accept and small_step)
-        converged = converged or done
-        active = not done and lam <= 1e12 and iterations < max_iter
-    fit = Ellipse.normalised(p[0], p[1], p[2], p[3], math.degrees(p[4]))
-    return fit, math.sqrt(cost / len(pts)), iterations, converged
+    """The documented Levenberg-Marquardt: the package's plain path
+    (:func:`labauto.vision.ellipse_plain.geometric`, numpy normal equations)."""
+    row = np.array([*start.center, *start.axes, start.angle])
+    fitted, rms, iterations, converged = ellipse_plain.geometric(pts, row, max_iter, tol)
+    return Ellipse.normalised(*fitted.tolist()), rms, iterations, converged
 
 
 def ref_algebraic(pts: np.ndarray) -> Ellipse:

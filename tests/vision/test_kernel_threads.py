@@ -1,4 +1,4 @@
-"""The kernels' thread count: same results on any number of threads, and safe across fork."""
+"""Threads: chosen by the caller, same results on any number, and no process-wide side effects."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import sys
 import numpy as np
 import pytest
 
+from labauto.cli import process
 from labauto.synthetic.shapes import make_scene
 from labauto.vision import kernels
 from labauto.vision.detector import detect
@@ -43,18 +44,32 @@ def test_results_do_not_depend_on_the_thread_count(scene, restore_threads) -> No
     assert _summary(scene) == serial
 
 
-def _detect_in_child(image: np.ndarray) -> tuple[int, list[tuple]]:
-    return kernels.threads(), _summary(image)
+def test_the_library_sets_nothing_for_the_process() -> None:
+    """Importing labauto and detecting sets no environment variable and uses one thread."""
+    code = (
+        "import os, numpy as np, labauto\n"
+        "from labauto.vision import kernels\n"
+        "labauto.detect(np.zeros((64, 64), np.uint8))\n"
+        "print(os.environ.get('OMP_WAIT_POLICY'), kernels.threads())\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_WAIT_POLICY", "LABAUTO_THREADS")}
+    done = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60
+    )
+    assert done.stdout.split() == ["None", "1"], done.stderr
+
+
+def _detect_in_child(image: np.ndarray) -> list[tuple]:
+    return _summary(image)
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="fork start method needs os.fork")
-def test_forked_children_detect_after_the_parent_used_threads(scene) -> None:
-    parent = _summary(scene)  # the parent's OpenMP thread pool now exists
+def test_forked_children_detect_without_any_fork_hook(scene, restore_threads) -> None:
+    kernels.set_threads(1)  # the library's default: no OpenMP thread pool to lose in a fork
+    parent = _summary(scene)
     with multiprocessing.get_context("fork").Pool(2) as pool:
         children = pool.map_async(_detect_in_child, [scene, scene]).get(timeout=60)
-    for threads, summary in children:
-        assert threads == 1
-        assert summary == parent
+    assert children == [parent, parent]
 
 
 @pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2"])
@@ -63,15 +78,17 @@ def test_set_threads_names_a_bad_count(bad, restore_threads) -> None:
         kernels.set_threads(bad)
 
 
-@pytest.mark.parametrize(
-    ("value", "expected"), [("3", "3"), ("zero", "LABAUTO_THREADS"), ("0", "LABAUTO_THREADS")]
-)
-def test_labauto_threads_environment_variable(value: str, expected: str) -> None:
-    done = subprocess.run(
-        [sys.executable, "-c", "from labauto.vision import kernels; print(kernels.threads())"],
-        env={**os.environ, "LABAUTO_THREADS": value},
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert expected in (done.stdout + done.stderr)
+def test_the_command_line_sets_wait_policy_and_threads(restore_threads) -> None:
+    environ: dict[str, str] = {"LABAUTO_THREADS": "3"}
+    process.configure(environ)
+    assert environ["OMP_WAIT_POLICY"] == "PASSIVE" and kernels.threads() == 3
+    environ = {"OMP_WAIT_POLICY": "ACTIVE"}
+    process.configure(environ)
+    assert environ["OMP_WAIT_POLICY"] == "ACTIVE"
+    assert kernels.threads() == len(os.sched_getaffinity(0))
+
+
+@pytest.mark.parametrize("value", ["zero", "0", "-2"])
+def test_a_bad_labauto_threads_is_named(value: str, restore_threads) -> None:
+    with pytest.raises(ValueError, match="LABAUTO_THREADS must be a whole number"):
+        process.configure({"LABAUTO_THREADS": value})

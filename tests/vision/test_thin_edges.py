@@ -7,30 +7,14 @@ import cv2
 import numpy as np
 import pytest
 
-from labauto.vision.edges import _NEIGHBOURS, _REMOVABLE, thin_edges
+from labauto.vision import kernels
+from labauto.vision.edges import thin_edges
 
 
 def _thin_reference(edges: np.ndarray, max_iter: int = 2) -> np.ndarray:
-    """Every edge pixel of a checkerboard class decided in every pass (no shortcuts)."""
-    padded = np.pad((edges != 0).astype(np.uint8), 1)
-    stride = padded.shape[1]
-    ys, xs = np.nonzero(padded)
-    linear = ys * stride + xs  # classes by parity of the row and of the linear index
-    for _ in range(max_iter):
-        changed = False
-        for cls in range(4):
-            sel = ((ys % 2) * 2 + (linear % 2)) == cls
-            y, x = ys[sel], xs[sel]
-            code = np.zeros(y.shape[0], np.uint8)
-            for bit, (dy, dx) in enumerate(_NEIGHBOURS):
-                code |= padded[y + dy, x + dx] << bit
-            remove = _REMOVABLE[code] & (padded[y, x] != 0)
-            if remove.any():
-                changed = True
-                padded[y[remove], x[remove]] = 0
-        if not changed:
-            break
-    return padded
+    """The package's plain path (every pixel of a class decided in every pass, numpy)."""
+    with kernels.using("plain"):
+        return thin_edges(edges, max_iter)
 
 
 @pytest.mark.parametrize("seed", range(6))

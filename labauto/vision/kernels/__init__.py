@@ -1,96 +1,165 @@
-"""Compiled kernels (Cython) of the detector's per-pixel and per-point loops.
+"""Optional compiled kernels (Cython) of the detector's hot loops, and the choice of backend.
 
-Each module here is the inner loop of one step of the paper, called from the pure-Python module
-of the same name in :mod:`labauto.vision`, which holds the documentation and input checks. They
-are built when the package is installed (``pip install .`` needs a C compiler); see setup.py.
+Every algorithm of :mod:`labauto.vision` is written in plain numpy/OpenCV in its own module;
+that is the reference and what runs when no kernel is built. A compiled kernel is an
+accelerator for one measured hot loop: it gives the same results as the plain path (the tests
+run on both) and is kept only where ``benchmarks/bench_kernels.py`` shows it saves a real share
+of a user-visible time. Installing without a C compiler gives the plain path (see setup.py).
 
-Threads: the long loops (per pixel, per contour) are shared among :func:`threads` OpenMP threads,
-by default one per CPU this process may run on, or ``LABAUTO_THREADS`` when set. OpenMP's thread
-pool does not survive ``fork``: a forked child (``multiprocessing`` with the fork start method)
-that entered a parallel loop would hang, so a child runs the kernels on one thread.
-
-Between parallel loops OpenMP's idle threads would by default spin for milliseconds, taking a
-core from OpenCV's own threads (Canny ran 1.7x slower right after the gradient kernel, and a
-plain OpenCV pipeline run after ``detect`` 1.4x slower). So unless ``OMP_WAIT_POLICY`` is set,
-labauto sets it to ``PASSIVE`` (idle threads sleep) before the first kernel loads OpenMP.
-
-CPU: on x86-64 the kernels are compiled for the CPU of the machine that built them (setup.py). A
-build copied to a CPU without the vector extensions it uses would die on an illegal instruction,
-so importing this package first checks them (:func:`check_cpu`) and names what is missing.
+Backend
+    ``"compiled"`` uses every kernel that is built; ``"plain"`` none. The default is
+    ``"compiled"`` when the kernels are built, else ``"plain"``; ``LABAUTO_KERNELS=off`` (read
+    once, when a kernel is first asked for) chooses ``"plain"``, ``LABAUTO_KERNELS=on``
+    requires the kernels (an ImportError names what is missing). The compiled modules (and
+    with them OpenMP) are loaded then too, not on import, so that a program can set
+    ``OMP_WAIT_POLICY`` and the like first. :func:`use` switches at run time; :func:`backend`
+    says which runs. A vision module asks :func:`compiled` for its kernel at each call and runs
+    its plain code when it gets None.
+Threads
+    The kernels' parallel loops use :func:`threads` OpenMP threads, 1 unless the caller chose
+    more with :func:`set_threads` (the ``labauto`` command line uses one per CPU). Nothing here
+    touches the process: no environment variable is set and no fork hook is installed. A
+    program that forks after running kernels on several threads must call ``set_threads(1)``
+    in the child (OpenMP's thread pool does not survive ``fork``); on one thread no pool
+    exists.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import importlib
+import importlib.util
 import os
+from collections.abc import Iterator
+from types import ModuleType
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # read once, when OpenMP is loaded
+#: The kernels this version of labauto has, by module name (``labauto.vision.kernels.<name>``).
+KERNELS = ("edges", "ellipse_fit", "gradient", "shape")
+
+BACKENDS = ("compiled", "plain")
 
 
-def cpu_flags(cpuinfo: str = "/proc/cpuinfo") -> set[str] | None:
-    """The CPU's feature flags from ``cpuinfo`` (Linux), or None where it cannot be read."""
+@functools.cache
+def level() -> str:
+    """The build of the kernels this CPU runs: ``"v3"`` (x86-64-v3, AVX2) or ``"generic"``."""
     try:
-        with open(cpuinfo, encoding="ascii", errors="replace") as lines:
-            for line in lines:
-                if line.startswith("flags"):
-                    return set(line.partition(":")[2].split())
-    except OSError:
-        pass
-    return None
+        from labauto.vision.kernels import _cpu
+    except ImportError:
+        return "generic"
+    return (
+        "v3"
+        if _cpu.x86_64_v3() and importlib.util.find_spec(f"{__name__}.v3.gradient")
+        else ("generic")
+    )
 
 
-def check_cpu(required: tuple[str, ...], flags: set[str] | None, march: str) -> None:
-    """Raise ImportError if the CPU (its ``flags``) lacks a vector extension the kernels use.
-
-    Parameters
-    ----------
-    required : tuple of str
-        Extensions the build target uses, as /proc/cpuinfo names them (``kernels/_build.py``).
-    flags : set of str or None
-        The CPU's flags (:func:`cpu_flags`); None (unknown) passes.
-    march : str
-        The build's ``-march`` target, for the message.
-    """
-    missing = [name for name in required if flags is not None and name not in flags]
-    if missing:
-        raise ImportError(
-            f"labauto's compiled kernels were built for -march={march} and use "
-            f"{', '.join(missing)}, which this CPU lacks; reinstall labauto on this machine "
-            "(pip install --force-reinstall --no-deps --no-binary labauto ...), or build it "
-            "for any x86-64 CPU with LABAUTO_MARCH=x86-64-v2"
-        )
-
-
-try:
-    from labauto.vision.kernels._build import CPU_FEATURES, MARCH
-except ImportError:  # kernels built by hand (cythonize), not by setup.py
-    pass
-else:
-    check_cpu(CPU_FEATURES, cpu_flags(), MARCH)
-
-
-def _default_threads() -> int:
-    configured = os.environ.get("LABAUTO_THREADS", "").strip()
-    if configured:
+@functools.cache
+def _load() -> dict[str, ModuleType]:
+    """The built kernels, by name (an empty dict when none is built); loaded once, from the
+    build for this CPU's vector level (:func:`level`)."""
+    package = f"{__name__}.v3" if level() == "v3" else __name__
+    found = {}
+    for name in KERNELS:
         try:
-            value = int(configured)
-        except ValueError:
-            raise ValueError(
-                f"LABAUTO_THREADS must be a whole number >= 1, got {configured!r}"
-            ) from None
-        if value < 1:
-            raise ValueError(f"LABAUTO_THREADS must be a whole number >= 1, got {configured!r}")
-        return value
+            found[name] = importlib.import_module(f"{package}.{name}")
+        except ImportError:
+            continue
+    return found
+
+
+def built() -> tuple[str, ...]:
+    """Names of the kernels that are built and importable."""
+    return tuple(_load())
+
+
+def _initial_backend(setting: str) -> str:
+    setting = setting.strip().lower()
+    found = _load()
+    if setting in ("off", "plain", "0", "no"):
+        return "plain"
+    if setting in ("on", "compiled", "1", "yes"):
+        missing = [name for name in KERNELS if name not in found]
+        if missing:
+            raise ImportError(
+                f"LABAUTO_KERNELS={setting} but these kernels are not built: "
+                f"{', '.join(missing)} (reinstall labauto with a C compiler, or unset it)"
+            )
+        return "compiled"
+    if setting not in ("", "auto"):
+        raise ImportError(f"LABAUTO_KERNELS must be on, off or auto, got {setting!r}")
+    return "compiled" if found else "plain"
+
+
+_backend: str | None = None  # chosen when first asked for
+_threads = 1
+
+
+def backend() -> str:
+    """The backend that runs: ``"compiled"`` or ``"plain"``."""
+    global _backend
+    if _backend is None:
+        _backend = _initial_backend(os.environ.get("LABAUTO_KERNELS", ""))
+    return _backend
+
+
+def describe() -> str:
+    """One line saying which backend runs, e.g. for ``labauto --version``."""
+    if backend() == "plain":
+        reason = "LABAUTO_KERNELS=off" if _load() else "no compiled kernels installed"
+        return f"vision backend: plain numpy/OpenCV ({reason})"
+    extra = " -march=x86-64-v3" if level() == "v3" else ""
+    return (
+        f"vision backend: compiled kernels ({', '.join(built())}; "
+        f"built with {' '.join(build_flags())}{extra})"
+    )
+
+
+def build_flags() -> tuple[str, ...]:
+    """The compiler flags the kernels were built with (setup.py records them), or ()."""
     try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
+        from labauto.vision.kernels import _build
+    except ImportError:  # kernels compiled by hand (cythonize), not by setup.py
+        return ()
+    return tuple(_build.COMPILE_ARGS)
 
 
-_threads = _default_threads()
+def use(name: str) -> None:
+    """Switch the backend to ``name`` (``"compiled"`` or ``"plain"``) from now on.
+
+    Raises
+    ------
+    ValueError
+        An unknown name, or ``"compiled"`` when no kernel is built.
+    """
+    global _backend
+    if name not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {name!r}")
+    if name == "compiled" and not _load():
+        raise ValueError("no compiled kernels are installed: only the plain backend runs")
+    _backend = name
+
+
+@contextlib.contextmanager
+def using(name: str) -> Iterator[None]:
+    """Run the ``with`` block on the backend ``name``, then switch back (see :func:`use`)."""
+    before = backend()
+    use(name)
+    try:
+        yield
+    finally:
+        use(before)
+
+
+def compiled(name: str) -> ModuleType | None:
+    """The compiled kernel ``name`` if it is built and the compiled backend runs, else None."""
+    if backend() != "compiled":
+        return None
+    return _load().get(name)
 
 
 def threads() -> int:
-    """Number of threads the kernels use for their parallel loops."""
+    """Number of threads the kernels use for their parallel loops (1 unless set)."""
     return _threads
 
 
@@ -108,6 +177,3 @@ def threads_for(count: int, min_count: int = 16) -> int:
     Waking a second thread costs tens of microseconds; a short loop is faster on one.
     """
     return _threads if count >= min_count else 1
-
-
-os.register_at_fork(after_in_child=lambda: set_threads(1))

@@ -30,15 +30,8 @@ edge map to the finished chains:
    over the image: without the prefetch the loop mostly waits on memory), then a vectorised
    loop does the arithmetic.
 
-With a gradient and more than one thread, one parallel region without barriers: the image is
-split into a top and a bottom band. The linking thread collects and thins the top band's own
-row steps while another thread does the bottom band's (the two touch disjoint rows and do not
-depend on each other; if no other thread has started yet, the linking thread does the bottom
-band too), then the linking thread does the few seam steps around the split and links,
-publishing each chain as it is done; the other threads sample published chains (and so does
-the linking thread once it is done). A thread woken late (this can take a few hundred
-microseconds) only takes less work. The samples go to a buffer in chain order and are copied
-into place at the end. The result does not depend on the number of threads.
+One thread does it all: on a 2-core machine shared with OpenCV a pipeline that sampled the
+chains on a second thread while the first linked them was 1.8x slower (issue 16).
 
 Buffers that depend on the number of edge pixels live in a :class:`Workspace` the caller keeps
 between calls (blocks that large are handed back to the system when freed, so fresh ones cost
@@ -46,7 +39,6 @@ page faults), and the work map is left all zero again (only the touched pixels a
 the caller keeps one per image size too.
 """
 
-from cython.parallel cimport parallel, threadid
 from libc.math cimport sqrt
 from libc.stdlib cimport free, malloc, realloc
 from libc.string cimport memcpy
@@ -56,8 +48,6 @@ import numpy as np
 cdef enum:
     BLOCK = 64  # sampling: points gathered, then computed vectorised, at a time
     AHEAD = 16  # sampling: prefetch the gradient rows of the point this far ahead
-    MIN_THREADED_ROWS = 64  # smaller maps are done on one thread
-    MIN_THREADED_AREA = 65536
 
 
 # marks in the work map: bit 0 edge pixel, the others are bookkeeping of the linker
@@ -154,54 +144,35 @@ cdef inline Py_ssize_t _row_of(Py_ssize_t p, Py_ssize_t stride, double inverse) 
 
 ctypedef struct Buffers:  # see Workspace
     Vec pixels  # padded indices of the edge pixels, row by row (of the top band)
-    Vec pixels2  # those of the bottom band (when the image is split between two threads)
     Vec chains  # chain pixels, chain after chain (room for all pixels: never moved while shared)
     Vec found  # (first pixel, start in chains, length) per chain, sorted by first pixel
-    Vec published  # (start in chains, length) per chain, in the order they were made
     Vec ordered  # chain pixels in output order (sampled straight into the outputs)
     Vec trace
     Vec stack
     Py_ssize_t* row_start  # pixels of padded row y: pixels[row_start[y]:row_start[y + 1]]
     Py_ssize_t row_cap
-    Py_ssize_t* row_start2  # the same for the rows of the bottom band, in pixels2
-    Py_ssize_t row2_cap
     unsigned long long* masks  # one row's bit masks of edge pixels
     Py_ssize_t mask_cap
-    unsigned long long* masks2  # (for the bottom band)
-    Py_ssize_t mask2_cap
-    double* points  # threaded sampling: per chain pixel (as ``chains``) its position (x, y)
-    Py_ssize_t points_cap
-    float* gradients  # and gradient
-    Py_ssize_t gradients_cap
 
 
 cdef int _prepare(Buffers* b, Py_ssize_t h, Py_ssize_t w) noexcept nogil:
     """Room for the per-row tables of an HxW map; empty lists. -1 when out of memory."""
     _clear(&b.pixels)  # (after a failed call too: a buffer that failed to grow is kept)
-    _clear(&b.pixels2)
     _clear(&b.chains)
     _clear(&b.found)
-    _clear(&b.published)
     _clear(&b.ordered)
     _clear(&b.trace)
     _clear(&b.stack)
     if _grow(<void**>&b.row_start, &b.row_cap, h + 3, sizeof(Py_ssize_t)) < 0 \
-            or _grow(<void**>&b.row_start2, &b.row2_cap, h + 3, sizeof(Py_ssize_t)) < 0 \
-            or _grow(<void**>&b.masks, &b.mask_cap, (w + 63) // 64, sizeof(long long)) < 0 \
-            or _grow(<void**>&b.masks2, &b.mask2_cap, (w + 63) // 64, sizeof(long long)) < 0:
+            or _grow(<void**>&b.masks, &b.mask_cap, (w + 63) // 64, sizeof(long long)) < 0:
         return -1
     return 0
 
 
-cdef int _reserve_links(Buffers* b, bint samples) noexcept nogil:
-    """Room in the chain buffers for every collected pixel (and their samples); -1 when out of
-    memory."""
-    cdef Py_ssize_t n = b.pixels.size + b.pixels2.size
-    if _reserve(&b.chains, n) < 0 or _reserve(&b.published, 2 * n) < 0 \
-            or _reserve(&b.ordered, n) < 0:
-        return -1
-    if samples and (_grow(<void**>&b.points, &b.points_cap, 2 * n, sizeof(double)) < 0
-                    or _grow(<void**>&b.gradients, &b.gradients_cap, 2 * n, sizeof(float)) < 0):
+cdef int _reserve_links(Buffers* b) noexcept nogil:
+    """Room in the chain buffers for every collected pixel; -1 when out of memory."""
+    cdef Py_ssize_t n = b.pixels.size
+    if _reserve(&b.chains, n) < 0 or _reserve(&b.ordered, n) < 0:
         return -1
     return 0
 
@@ -217,45 +188,29 @@ cdef class Workspace:
 
     def __cinit__(self):
         _init(&self.b.pixels, 4096)
-        _init(&self.b.pixels2, 4096)
         _init(&self.b.chains, 4096)
         _init(&self.b.found, 256)
-        _init(&self.b.published, 256)
         _init(&self.b.ordered, 4096)
         _init(&self.b.trace, 4096)
         _init(&self.b.stack, 1024)
         self.b.row_start = NULL
         self.b.row_cap = 0
-        self.b.row_start2 = NULL
-        self.b.row2_cap = 0
         self.b.masks = NULL
         self.b.mask_cap = 0
-        self.b.masks2 = NULL
-        self.b.mask2_cap = 0
-        self.b.points = NULL
-        self.b.points_cap = 0
-        self.b.gradients = NULL
-        self.b.gradients_cap = 0
-        if self.b.pixels.failed or self.b.pixels2.failed or self.b.chains.failed \
-                or self.b.found.failed or self.b.published.failed or self.b.ordered.failed \
+        if self.b.pixels.failed or self.b.chains.failed \
+                or self.b.found.failed or self.b.ordered.failed \
                 or self.b.trace.failed or self.b.stack.failed:
             raise MemoryError("Workspace: out of memory")
 
     def __dealloc__(self):
         free(self.b.pixels.data)
-        free(self.b.pixels2.data)
         free(self.b.chains.data)
         free(self.b.found.data)
-        free(self.b.published.data)
         free(self.b.ordered.data)
         free(self.b.trace.data)
         free(self.b.stack.data)
         free(self.b.row_start)
-        free(self.b.row_start2)
         free(self.b.masks)
-        free(self.b.masks2)
-        free(self.b.points)
-        free(self.b.gradients)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -265,51 +220,17 @@ cdef class Workspace:
 cdef extern from *:
     """
     #include <string.h>
-    #if defined(__x86_64__) || defined(__i386__) || defined(_M_X64)
-    #include <immintrin.h>
-    #define LABAUTO_X86 1
-    #endif
     static inline int labauto_ctz64(unsigned long long v) { return __builtin_ctzll(v); }
 
-    /* bit k set where p[k] != 0, k < 64 (one AVX-512 test, or 32- or 16-byte compares, or a
-       plain loop on CPUs other than x86) */
-    static inline unsigned long long labauto_nonzero64(const unsigned char* p) {
-    #if defined(__AVX512BW__)
-        const __m512i v = _mm512_loadu_si512((const void*)p);
-        return _mm512_test_epi8_mask(v, v);
-    #elif defined(__AVX2__)
-        const __m256i zero = _mm256_setzero_si256();
-        unsigned long long lo = (unsigned)_mm256_movemask_epi8(
-            _mm256_cmpeq_epi8(_mm256_loadu_si256((const __m256i*)p), zero));
-        unsigned long long hi = (unsigned)_mm256_movemask_epi8(
-            _mm256_cmpeq_epi8(_mm256_loadu_si256((const __m256i*)(p + 32)), zero));
-        return ~(lo | hi << 32);
-    #elif defined(LABAUTO_X86)
-        const __m128i zero = _mm_setzero_si128();
-        unsigned long long zeros = 0, bits;
-        for (int k = 0; k < 4; k++) {
-            bits = (unsigned)_mm_movemask_epi8(
-                _mm_cmpeq_epi8(_mm_loadu_si128((const __m128i*)(p + 16 * k)), zero));
-            zeros |= bits << (16 * k);
-        }
-        return ~zeros;
-    #else  /* other CPUs: the compiler vectorises this as it can */
-        unsigned long long found = 0;
-        for (int k = 0; k < 64; k++) found |= (unsigned long long)(p[k] != 0) << k;
-        return found;
-    #endif
-    }
-
-    /* the same for the last n < 64 pixels of a row */
+    /* bit k set where p[k] != 0, for the n <= 64 bytes p[0..n-1] (a plain loop the compiler
+       vectorises) */
     static inline unsigned long long labauto_nonzero_tail(const unsigned char* p, Py_ssize_t n) {
-    #if defined(__AVX512BW__)
-        const __m512i v = _mm512_maskz_loadu_epi8((1ULL << n) - 1, (const void*)p);
-        return _mm512_test_epi8_mask(v, v);
-    #else
         unsigned long long found = 0;
         for (Py_ssize_t k = 0; k < n; k++) found |= (unsigned long long)(p[k] != 0) << k;
         return found;
-    #endif
+    }
+    static inline unsigned long long labauto_nonzero64(const unsigned char* p) {
+        return labauto_nonzero_tail(p, 64);
     }
 
     /* four bytes from p (any alignment), byte k in bits 8k..8k+7 */
@@ -322,46 +243,8 @@ cdef extern from *:
         return v;
     }
 
-    /* hand-over between the linking thread and the sampling threads: relaxed/acquire/release
-       atomics, a pause in spin loops */
-    static inline Py_ssize_t labauto_load_acquire(const Py_ssize_t* p) {
-        return __atomic_load_n(p, __ATOMIC_ACQUIRE);
-    }
-    static inline Py_ssize_t labauto_load_relaxed(const Py_ssize_t* p) {
-        return __atomic_load_n(p, __ATOMIC_RELAXED);
-    }
-    static inline void labauto_store_release(Py_ssize_t* p, Py_ssize_t v) {
-        __atomic_store_n(p, v, __ATOMIC_RELEASE);
-    }
-    static inline int labauto_claim(Py_ssize_t* p, Py_ssize_t expected) {
-        return __atomic_compare_exchange_n(p, &expected, expected + 1, 0, __ATOMIC_RELAXED,
-                                           __ATOMIC_RELAXED);
-    }
-    static inline void labauto_add_release(Py_ssize_t* p, Py_ssize_t v) {
-        __atomic_fetch_add(p, v, __ATOMIC_RELEASE);
-    }
-    #if defined(LABAUTO_X86)
-    static inline void labauto_pause(void) { _mm_pause(); }
-    #else
-    static inline void labauto_pause(void) {}
-    #endif
-
-    /* a prefetch the optimiser keeps: a function whose only effect is __builtin_prefetch is
-       found side-effect free by GCC's interprocedural analysis and its calls are dropped */
-    static inline void labauto_prefetch(const void* p) {
-    #if defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
-        __asm__ __volatile__("prefetcht0 %0" : : "m"(*(const char*)p));
-    #else
-        __builtin_prefetch(p);
-    #endif
-    }
-    #if defined(_WIN32)
-    static inline void labauto_yield(void) {}
-    #else
-    #include <sched.h>
-    static inline void labauto_yield(void) { sched_yield(); }
-    #endif
-
+    /* a macro, not a function: GCC drops calls of a function whose only effect is a prefetch */
+    #define labauto_prefetch(p) __builtin_prefetch(p)
     /* the 9-bit neighbourhood index bit of the ring N, NE, E, SE, S, SW, W, NW (the removable
        table's code) and of the tracer's directions E, NE, N, NW, W, SW, S, SE */
     static const int labauto_ring_bits[8] = {3, 6, 7, 8, 5, 2, 1, 0};
@@ -374,13 +257,6 @@ cdef extern from *:
     unsigned _load4 "labauto_load4"(const unsigned char* p) noexcept nogil
     void _prefetch "labauto_prefetch"(const void* address) noexcept nogil
     const int* RING_BITS "labauto_ring_bits"
-    Py_ssize_t _load_acquire "labauto_load_acquire"(const Py_ssize_t* p) noexcept nogil
-    Py_ssize_t _load_relaxed "labauto_load_relaxed"(const Py_ssize_t* p) noexcept nogil
-    void _store_release "labauto_store_release"(Py_ssize_t* p, Py_ssize_t v) noexcept nogil
-    bint _claim "labauto_claim"(Py_ssize_t* p, Py_ssize_t expected) noexcept nogil
-    void _add_release "labauto_add_release"(Py_ssize_t* p, Py_ssize_t v) noexcept nogil
-    void _pause "labauto_pause"() noexcept nogil
-    void _yield "labauto_yield"() noexcept nogil
     const int* DIRECTION_BITS "labauto_direction_bits"
 
 
@@ -643,30 +519,15 @@ cdef int _collect(
     return 0
 
 
-cdef enum:  # the row steps of the thinning a call of _thin does
-    ALL_STEPS  # (one band)
-    TOP_STEPS  # of rows y < m with y + K <= m - 2: they touch only rows above m
-    BOTTOM_STEPS  # of rows y >= m with y - K >= m + 1: they touch only rows m and below
-    SEAM_STEPS  # the others, after both
-
-
 cdef void _thin(
-    unsigned char* pad, Py_ssize_t stride, Py_ssize_t h, int max_iter, int part, Py_ssize_t m,
-    const Buffers* ws, const unsigned char* removable9,
+    unsigned char* pad, Py_ssize_t stride, Py_ssize_t h, int max_iter, const Buffers* ws,
+    const unsigned char* removable9,
 ) noexcept nogil:
-    """Row steps ``part`` of the thinning (see the module docstring): in round ``r`` every
-    padded row ``y`` with ``y + 2 K = r`` takes row step ``K`` (``K = 2 it + y % 2``,
-    ``it < max_iter``). Rows above ``m`` are listed in ``ws.pixels``, the others in
-    ``ws.pixels2`` (``m > h``: all in ``ws.pixels``).
-
-    Splitting the image at padded row ``m``: a step depends only on the steps before it on the
-    rows next to it, so the top steps (``y + K <= m - 2``) depend only on top steps and the
-    bottom ones only on bottom ones; the two sets touch disjoint rows and can run at once. The
-    remaining seam steps, a few rows around ``m``, run after both, in round order.
-    """
+    """The thinning (see the module docstring): in round ``r`` every padded row ``y`` with
+    ``y + 2 K = r`` takes row step ``K`` (``K = 2 it + y % 2``, ``it < max_iter``); the rows'
+    pixels are listed in ``ws.pixels``."""
     cdef Py_ssize_t offsets9[9]
     cdef Py_ssize_t r, y, k, steps = 2 * max(max_iter, 0)
-    cdef bint top, bottom
     for k in range(9):
         offsets9[k] = (k % 3 - 1) * stride + k // 3 - 1
     for r in range(2, h + 2 * steps):
@@ -676,17 +537,8 @@ cdef void _thin(
             if y < 1:
                 break
             if y <= h:
-                top = y < m and y + k <= m - 2
-                bottom = y >= m and y - k >= m + 1
-                if part == ALL_STEPS or (part == TOP_STEPS and top) \
-                        or (part == BOTTOM_STEPS and bottom) \
-                        or (part == SEAM_STEPS and not top and not bottom):
-                    if y < m:
-                        _thin_row(pad, stride, ws.pixels.data, ws.row_start[y],
-                                  ws.row_start[y + 1], removable9, offsets9, k < 2)
-                    else:
-                        _thin_row(pad, stride, ws.pixels2.data, ws.row_start2[y],
-                                  ws.row_start2[y + 1], removable9, offsets9, k < 2)
+                _thin_row(pad, stride, ws.pixels.data, ws.row_start[y], ws.row_start[y + 1],
+                          removable9, offsets9, k < 2)
             k += 2
 
 
@@ -719,7 +571,7 @@ def thin(unsigned char[:, ::1] padded, const unsigned char[::1] removable, int m
             status = _collect(&padded[1, 1], 0, h - 2, w - 2, w, pad, w, &ws.pixels, ws.row_start,
                               ws.masks)
         if status == 0:
-            _thin(pad, w, h - 2, max_iter, ALL_STEPS, h - 1, ws, removable9)
+            _thin(pad, w, h - 2, max_iter, ws, removable9)
         for i in range(ws.pixels.size):  # drop the DIRTY marks
             pad[ws.pixels.data[i]] = pad[ws.pixels.data[i]] != 0
     if status < 0:
@@ -847,30 +699,9 @@ cdef Py_ssize_t _component(
     return size
 
 
-ctypedef struct Pipeline:  # the work shared by the threads of link()
-    Py_ssize_t bottom  # 1 once a thread has taken the bottom band
-    Py_ssize_t bottom_done  # 1 once it is collected and thinned (release/acquire)
-    int bottom_status
-    Py_ssize_t published  # chains made so far (ws.published; release/acquire)
-    Py_ssize_t next  # next chain to take
-    Py_ssize_t sampled  # chains sampled
-    Py_ssize_t finished  # 1 when linking is done
-    int status  # the linker's status
-    const Sampler* sampler  # the gradient (to prefetch the start of each chain published)
-    # the call's arguments
-    const unsigned char* edges
-    unsigned char* pad
-    Py_ssize_t h
-    Py_ssize_t w
-    Py_ssize_t m  # the bands: padded rows 1..m - 1 and m..h
-    int max_iter
-    const unsigned char* removable9
-    Buffers* ws
-
-
 cdef int _link_chains(
     unsigned char* pad, Py_ssize_t stride, Buffers* ws, Py_ssize_t min_length,
-    Py_ssize_t max_length, Pipeline* pipe,
+    Py_ssize_t max_length,
 ) noexcept nogil:
     """Trace and chain every component of the thinned map (``ws.pixels``) with at least
     ``min_length`` pixels (a chain has at most as many pixels as its component); keep the
@@ -879,9 +710,7 @@ cdef int _link_chains(
     The chains' pixels go to ``ws.chains`` (room reserved for all pixels), one chain after the
     other; ``ws.found`` gets three values per chain, sorted by the first: the component's first
     pixel (smallest padded index), where the chain starts in ``ws.chains`` and its length;
-    ``ws.published`` (room reserved) gets (start, length) in the order the chains are made and,
-    with a ``pipe``, each chain is published there as soon as it is done. Returns -1 when out
-    of memory.
+    Returns -1 when out of memory.
 
     Components are met row by row (``pixels`` lists a row's even indices before its odd ones):
     all of a component's pixels lie in or below the row it is met in, so its first pixel is the
@@ -893,127 +722,44 @@ cdef int _link_chains(
     cdef Py_ssize_t n_pixels  # (locals: the marks are byte stores, which may alias anything
     cdef const Py_ssize_t* pixels  # behind a pointer)
     cdef Py_ssize_t* chains = ws.chains.data
-    cdef Py_ssize_t* published = ws.published.data
-    cdef Py_ssize_t n_published = 0
     cdef Vec* found = &ws.found
     cdef unsigned char v
-    cdef int status = 0, band
+    cdef int status = 0
     for k in range(8):  # E, NE, N, NW, W, SW, S, SE
         deltas[k] = (DIRECTION_BITS[k] % 3 - 1) * stride + DIRECTION_BITS[k] // 3 - 1
         deltas[k + 8] = deltas[k]
         ring[k] = deltas[k]
-    for band in range(2):  # the top band's pixels, then the bottom band's
-        n_pixels = ws.pixels.size if band == 0 else ws.pixels2.size
-        pixels = ws.pixels.data if band == 0 else ws.pixels2.data
-        for i in range(n_pixels):
-            p = pixels[i]
-            v = pad[p]
-            if v == 0 or v & DONE:  # removed by thinning, or in a component marked
-                continue
-            size = _component(pad, ring, p, &ws.stack, &first)
-            if size < min_length or ws.stack.failed:
-                continue
-            _trace_outer(pad, first, deltas, &ws.trace)
-            if ws.trace.failed or _reserve(found, found.size + 3) < 0:
-                break
-            n = _chain(pad, ws.trace.data, ws.trace.size, chains + total)
-            if n < min_length or (max_length >= 0 and n > max_length):
-                continue
-            k = found.size  # insert by first pixel (only within this row's components)
-            while k > 0 and found.data[k - 3] > first:
-                found.data[k] = found.data[k - 3]
-                found.data[k + 1] = found.data[k - 2]
-                found.data[k + 2] = found.data[k - 1]
-                k -= 3
-            found.data[k] = first
-            found.data[k + 1] = total
-            found.data[k + 2] = n
-            found.size += 3
-            published[2 * n_published] = total
-            published[2 * n_published + 1] = n
-            n_published += 1
-            if pipe != NULL:
-                for k in range(min(n, AHEAD)):  # a sampling thread will start on this chain
-                    _prefetch_point(pipe.sampler, chains[total + k], stride, 1, 1.0 / stride)
-                _store_release(&pipe.published, n_published)
-            total += n
+    n_pixels = ws.pixels.size
+    pixels = ws.pixels.data
+    for i in range(n_pixels):
+        p = pixels[i]
+        v = pad[p]
+        if v == 0 or v & DONE:  # removed by thinning, or in a component marked
+            continue
+        size = _component(pad, ring, p, &ws.stack, &first)
+        if size < min_length or ws.stack.failed:
+            continue
+        _trace_outer(pad, first, deltas, &ws.trace)
+        if ws.trace.failed or _reserve(found, found.size + 3) < 0:
+            break
+        n = _chain(pad, ws.trace.data, ws.trace.size, chains + total)
+        if n < min_length or (max_length >= 0 and n > max_length):
+            continue
+        k = found.size  # insert by first pixel (only within this row's components)
+        while k > 0 and found.data[k - 3] > first:
+            found.data[k] = found.data[k - 3]
+            found.data[k + 1] = found.data[k - 2]
+            found.data[k + 2] = found.data[k - 1]
+            k -= 3
+        found.data[k] = first
+        found.data[k + 1] = total
+        found.data[k + 2] = n
+        found.size += 3
+        total += n
     ws.chains.size = total
-    ws.published.size = 2 * n_published
     if ws.stack.failed or ws.trace.failed or found.failed:
         status = -1
     return status
-
-
-cdef void _bottom_band(Pipeline* pipe) noexcept nogil:
-    """Collect and thin the bottom band's own steps, unless another thread has taken it."""
-    cdef int status
-    if not _claim(&pipe.bottom, 0):
-        return
-    status = _collect(pipe.edges, pipe.m - 1, pipe.h, pipe.w, pipe.w, pipe.pad, pipe.w + 2,
-                      &pipe.ws.pixels2, pipe.ws.row_start2, pipe.ws.masks2)
-    if status == 0:
-        _thin(pipe.pad, pipe.w + 2, pipe.h, pipe.max_iter, BOTTOM_STEPS, pipe.m, pipe.ws,
-              pipe.removable9)
-    pipe.bottom_status = status
-    _store_release(&pipe.bottom_done, 1)
-
-
-cdef void _link_in_bands(
-    Pipeline* pipe, Py_ssize_t min_length, Py_ssize_t max_length
-) noexcept nogil:
-    """The linking thread's part: the top band, the bottom band too if no other thread has
-    taken it (else wait for it), the seam, then the chains (published as they are made)."""
-    cdef Py_ssize_t stride = pipe.w + 2, spins = 0
-    cdef int status = _collect(pipe.edges, 0, pipe.m - 1, pipe.w, pipe.w, pipe.pad, stride,
-                               &pipe.ws.pixels, pipe.ws.row_start, pipe.ws.masks)
-    if status == 0:
-        _thin(pipe.pad, stride, pipe.h, pipe.max_iter, TOP_STEPS, pipe.m, pipe.ws,
-              pipe.removable9)
-    _bottom_band(pipe)
-    while not _load_acquire(&pipe.bottom_done):
-        _pause()
-        spins += 1
-        if spins % 256 == 0:
-            _yield()
-    if status == 0:
-        status = pipe.bottom_status
-    if status == 0:
-        _thin(pipe.pad, stride, pipe.h, pipe.max_iter, SEAM_STEPS, pipe.m, pipe.ws,
-              pipe.removable9)
-        status = _reserve_links(pipe.ws, True)
-    if status == 0:
-        status = _link_chains(pipe.pad, stride, pipe.ws, min_length, max_length, pipe)
-    pipe.status = status
-    _store_release(&pipe.finished, 1)
-
-
-cdef void _sample_published(
-    Pipeline* pipe, const Buffers* ws, Py_ssize_t stride, Sampler* s
-) noexcept nogil:
-    """Take published chains one at a time and sample them into ``ws.points`` and
-    ``ws.gradients`` (at their rows in ``ws.chains``) until linking is finished and every chain
-    is taken. Waits for chains by spinning (yielding now and then)."""
-    cdef Py_ssize_t c, start, n, spins = 0
-    while True:
-        c = _load_relaxed(&pipe.next)
-        if c < _load_acquire(&pipe.published):
-            if _claim(&pipe.next, c):
-                start = ws.published.data[2 * c]
-                n = ws.published.data[2 * c + 1]
-                s.points = ws.points + 2 * start
-                s.gradients = ws.gradients + 2 * start
-                s.done = 0
-                _sample_run(s, ws.chains.data + start, n, stride, 1)
-                _add_release(&pipe.sampled, 1)
-            continue
-        if _load_acquire(&pipe.finished):
-            if _load_relaxed(&pipe.next) >= _load_acquire(&pipe.published):
-                return
-            continue
-        _pause()
-        spins += 1
-        if spins % 256 == 0:
-            _yield()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1054,7 +800,7 @@ def link(
     const unsigned char[:, ::1] edges, unsigned char[:, ::1] work,
     const unsigned char[::1] removable, int max_iter, Py_ssize_t min_length,
     Py_ssize_t max_length, const short[:, ::1] gx=None, const short[:, ::1] gy=None,
-    bint subpixel=False, Workspace workspace=None, int num_threads=1,
+    bint subpixel=False, Workspace workspace=None,
 ):
     """Thin, trace and chain the edge map; see the module docstring.
 
@@ -1068,8 +814,6 @@ def link(
     gx, gy : int16 HxW gradient, or None
     subpixel : with ``gx``, ``gy``: refine the points
     workspace : buffers kept between calls (None: fresh ones)
-    num_threads : threads (with a gradient: the bottom band of the thinning and the sampling
-        are shared; the result does not depend on it)
 
     Returns
     -------
@@ -1078,17 +822,12 @@ def link(
     float32 (N, 2), bool (K,) (first and last pixel 8-neighbours, more than two pixels).
     """
     cdef Py_ssize_t h = edges.shape[0], w = edges.shape[1], stride = w + 2
-    cdef Py_ssize_t i, k, n, at, n_chains, total, first, last, spins = 0
+    cdef Py_ssize_t i, k, n, at, n_chains, total, first, last
     cdef bint with_gradient = gx is not None
-    cdef bint threaded = with_gradient and num_threads > 1 and h >= MIN_THREADED_ROWS \
-        and h * w >= MIN_THREADED_AREA
     cdef unsigned char* pad
     cdef unsigned char removable9[512]
     cdef Buffers* ws
-    cdef Pipeline pipe
-    cdef Pipeline* shared = &pipe  # (the threads share it through a pointer)
     cdef Sampler sampler
-    cdef Sampler* own
     cdef int status = 0
     cdef int[:, ::1] out_pixels
     cdef double[:, ::1] out_points
@@ -1104,8 +843,6 @@ def link(
         or gy.shape[1] != w
     ):
         raise ValueError("link: gx and gy must both have the shape of the edge map")
-    if num_threads < 1:
-        raise ValueError(f"num_threads must be >= 1, got {num_threads}")
     if workspace is None:
         workspace = Workspace()
     ws = &workspace.b
@@ -1113,54 +850,16 @@ def link(
     with nogil:
         _removable9(&removable[0], removable9)
         status = _prepare(ws, h, w)
-        if status == 0 and not threaded:
+        if status == 0:
             status = _collect(&edges[0, 0], 0, h, w, w, pad, stride, &ws.pixels, ws.row_start,
                               ws.masks)
-            if status == 0:
-                _thin(pad, stride, h, max_iter, ALL_STEPS, h + 1, ws, removable9)
-                status = _reserve_links(ws, False)
-            if status == 0:
-                status = _link_chains(pad, stride, ws, min_length, max_length, NULL)
-        elif status == 0:
-            pipe.bottom = 0
-            pipe.bottom_done = 0
-            pipe.bottom_status = 0
-            pipe.published = 0
-            pipe.next = 0
-            pipe.sampled = 0
-            pipe.finished = 0
-            pipe.status = 0
-            _start_sampler(&sampler, &gx[0, 0], &gy[0, 0], h, w, subpixel, NULL, NULL)
-            pipe.sampler = &sampler
-            pipe.edges = &edges[0, 0]
-            pipe.pad = pad
-            pipe.h = h
-            pipe.w = w
-            pipe.m = 1 + h // 2
-            pipe.max_iter = max_iter
-            pipe.removable9 = removable9
-            pipe.ws = ws
-            with parallel(num_threads=num_threads):
-                own = <Sampler*>malloc(sizeof(Sampler))  # (one per thread, ~2 kB)
-                if own != NULL:
-                    _start_sampler(own, &gx[0, 0], &gy[0, 0], h, w, subpixel, NULL, NULL)
-                if threadid() == 0:
-                    _link_in_bands(shared, min_length, max_length)
-                    if own == NULL:
-                        shared.status = -1
-                else:
-                    _bottom_band(shared)
-                if own != NULL:
-                    _sample_published(shared, ws, stride, own)
-                free(own)
-                if threadid() == 0:  # the chains taken by other threads are done
-                    while _load_acquire(&shared.sampled) < _load_relaxed(&shared.next):
-                        _pause()
-            status = pipe.status
+        if status == 0:
+            _thin(pad, stride, h, max_iter, ws, removable9)
+            status = _reserve_links(ws)
+        if status == 0:
+            status = _link_chains(pad, stride, ws, min_length, max_length)
         for i in range(ws.pixels.size):
             pad[ws.pixels.data[i]] = 0
-        for i in range(ws.pixels2.size):
-            pad[ws.pixels2.data[i]] = 0
     if status < 0:
         raise MemoryError("link: out of memory")
     n_chains = ws.found.size // 3  # output order: the reverse of ``found``
@@ -1191,22 +890,16 @@ def link(
             for k in range(n_chains):
                 at = ws.found.data[3 * (n_chains - 1 - k) + 1]
                 n = out_offsets[k + 1] - out_offsets[k]
-                if threaded:  # sampled in chain order: copy into place
-                    memcpy(&out_points[out_offsets[k], 0], ws.points + 2 * at,
-                           2 * n * sizeof(double))
-                    memcpy(&out_gradients[out_offsets[k], 0], ws.gradients + 2 * at,
-                           2 * n * sizeof(float))
-                else:  # the pixels in output order, sampled below in one run
-                    memcpy(ws.ordered.data + out_offsets[k], ws.chains.data + at,
-                           n * sizeof(Py_ssize_t))
+                # the pixels in output order, sampled below in one run
+                memcpy(ws.ordered.data + out_offsets[k], ws.chains.data + at,
+                       n * sizeof(Py_ssize_t))
                 first = ws.chains.data[at]
                 last = ws.chains.data[at + n - 1]
                 out_closed[k] = n > 2 and -1 <= first % stride - last % stride <= 1 \
                     and -1 <= first // stride - last // stride <= 1
-            if not threaded:
-                _start_sampler(&sampler, &gx[0, 0], &gy[0, 0], h, w, subpixel,
-                               &out_points[0, 0], &out_gradients[0, 0])
-                _sample_run(&sampler, ws.ordered.data, total, stride, 1)
+            _start_sampler(&sampler, &gx[0, 0], &gy[0, 0], h, w, subpixel,
+                           &out_points[0, 0], &out_gradients[0, 0])
+            _sample_run(&sampler, ws.ordered.data, total, stride, 1)
     return points, offsets, gradients, closed
 
 

@@ -15,11 +15,7 @@ whole vectors of 4 doubles without a scalar remainder; the padding adds nothing 
 or result.
 
 Sums over a contour's points (the moments of the algebraic fit, the cost, J^T d and J^T J of
-the geometric fit) run in point order, each sum exactly as a scalar loop adds. With AVX they
-are computed four points at a time (see "ordered sums" below): the terms as vectors over four
-points, a 4x4 transpose, then one vector add per point into four sums at once - the same
-additions in the same order, so the same bits, with a half to a third of the instructions of
-the compiler's own in-order reduction; without AVX a plain loop does the same sums. Compiled with
+the geometric fit) run in point order, as plain loops (see "ordered sums" below). Compiled with
 ``-fno-math-errno`` (see the second line) so that loops with ``sqrt`` vectorise, and (setup.py)
 with ``-ffp-contract=off``: no fused multiply-adds, every product and sum rounded as written.
 
@@ -51,73 +47,16 @@ cdef enum:
 
 cdef extern from *:
     """
-    #if defined(__AVX__)
-    #include <immintrin.h>
-    /* Four sums (the lanes of acc) plus four points' terms, point by point: lane l of a, b,
-       c, e is point l's term of sum 0, 1, 2, 3. A 4x4 transpose gives one vector per point,
-       added to acc in point order, so every sum sees exactly the additions of a scalar loop
-       over the points. */
-    static inline __m256d labauto_add_points(__m256d acc, __m256d a, __m256d b, __m256d c,
-                                             __m256d e) {
-        const __m256d ab0 = _mm256_unpacklo_pd(a, b), ab1 = _mm256_unpackhi_pd(a, b);
-        const __m256d ce0 = _mm256_unpacklo_pd(c, e), ce1 = _mm256_unpackhi_pd(c, e);
-        acc = _mm256_add_pd(acc, _mm256_permute2f128_pd(ab0, ce0, 0x20));  /* point 0 */
-        acc = _mm256_add_pd(acc, _mm256_permute2f128_pd(ab1, ce1, 0x20));  /* point 1 */
-        acc = _mm256_add_pd(acc, _mm256_permute2f128_pd(ab0, ce0, 0x31));  /* point 2 */
-        return _mm256_add_pd(acc, _mm256_permute2f128_pd(ab1, ce1, 0x31));  /* point 3 */
-    }
-    #endif
 
     /* The sums of _evaluate over m points, added to acc[0..20] in point order:
        acc[0] += d^2, acc[1 + r] += j_r d, acc[6 + q] += j_r j_c (r <= c, row by row: the
-       upper triangle of J^T J), with d = dd[k] and j_r = jj[r * stride + k]. With AVX four
-       points at a time (the products as vectors over the points, then labauto_add_points for
-       acc[0..19], the four terms of acc[20] added one by one); the rest, or every point
-       without AVX, in a plain loop. The same sums to the last bit either way. */
+       upper triangle of J^T J), with d = dd[k] and j_r = jj[r * stride + k]. */
     static void labauto_normal_sums(const double* dd, const double* jj, Py_ssize_t stride,
                                     Py_ssize_t m, double* acc) {
         Py_ssize_t k = 0;
         int r, c, q;
         double d, j[5];
-    #if defined(__AVX__)
-        if (m >= 4) {
-            __m256d s0 = _mm256_loadu_pd(acc), s1 = _mm256_loadu_pd(acc + 4);
-            __m256d s2 = _mm256_loadu_pd(acc + 8), s3 = _mm256_loadu_pd(acc + 12);
-            __m256d s4 = _mm256_loadu_pd(acc + 16);
-            __m128d h44 = _mm_load_sd(acc + 20);
-            for (; k + 4 <= m; k += 4) {
-                const __m256d vd = _mm256_loadu_pd(dd + k);
-                const __m256d j0 = _mm256_loadu_pd(jj + k);
-                const __m256d j1 = _mm256_loadu_pd(jj + stride + k);
-                const __m256d j2 = _mm256_loadu_pd(jj + 2 * stride + k);
-                const __m256d j3 = _mm256_loadu_pd(jj + 3 * stride + k);
-                const __m256d j4 = _mm256_loadu_pd(jj + 4 * stride + k);
-                s0 = labauto_add_points(s0, _mm256_mul_pd(vd, vd), _mm256_mul_pd(j0, vd),
-                                        _mm256_mul_pd(j1, vd), _mm256_mul_pd(j2, vd));
-                s1 = labauto_add_points(s1, _mm256_mul_pd(j3, vd), _mm256_mul_pd(j4, vd),
-                                        _mm256_mul_pd(j0, j0), _mm256_mul_pd(j0, j1));
-                s2 = labauto_add_points(s2, _mm256_mul_pd(j0, j2), _mm256_mul_pd(j0, j3),
-                                        _mm256_mul_pd(j0, j4), _mm256_mul_pd(j1, j1));
-                s3 = labauto_add_points(s3, _mm256_mul_pd(j1, j2), _mm256_mul_pd(j1, j3),
-                                        _mm256_mul_pd(j1, j4), _mm256_mul_pd(j2, j2));
-                s4 = labauto_add_points(s4, _mm256_mul_pd(j2, j3), _mm256_mul_pd(j2, j4),
-                                        _mm256_mul_pd(j3, j3), _mm256_mul_pd(j3, j4));
-                /* the last sum alone: its four terms in order */
-                const __m256d t = _mm256_mul_pd(j4, j4);
-                const __m128d t01 = _mm256_castpd256_pd128(t);
-                const __m128d t23 = _mm256_extractf128_pd(t, 1);
-                h44 = _mm_add_sd(_mm_add_sd(h44, t01), _mm_unpackhi_pd(t01, t01));
-                h44 = _mm_add_sd(_mm_add_sd(h44, t23), _mm_unpackhi_pd(t23, t23));
-            }
-            _mm256_storeu_pd(acc, s0);
-            _mm256_storeu_pd(acc + 4, s1);
-            _mm256_storeu_pd(acc + 8, s2);
-            _mm256_storeu_pd(acc + 12, s3);
-            _mm256_storeu_pd(acc + 16, s4);
-            _mm_store_sd(acc + 20, h44);
-        }
-    #endif
-        for (; k < m; k++) {  /* the rest (or every point without AVX) */
+        for (; k < m; k++) {
             d = dd[k];
             for (r = 0; r < 5; r++) j[r] = jj[r * stride + k];
             acc[0] += d * d;
@@ -131,45 +70,12 @@ cdef extern from *:
     /* The moment sums of _algebraic over n points (x, y interleaved), added to mom[0..13] in
        point order: x, y, x^2, xy, y^2, x^3, x^2 y, x y^2, y^3, x^4, x^3 y, x^2 y^2, x y^3, y^4
        of x = (x - mx) inv, y = (y - my) inv (the products as written below). mom[14..15]
-       must be 0 (padding, left 0). With AVX four points at a time, as labauto_normal_sums
-       (the points de-interleaved into a vector of four x and one of four y). */
+       must be 0 (padding, left 0). */
     static void labauto_moment_sums(const double* pts, Py_ssize_t n, double mx, double my,
                                     double inv, double* mom) {
         Py_ssize_t i = 0;
         double x, y, xx, xy, yy;
-    #if defined(__AVX__)
-        if (n >= 4) {
-            __m256d s0 = _mm256_loadu_pd(mom), s1 = _mm256_loadu_pd(mom + 4);
-            __m256d s2 = _mm256_loadu_pd(mom + 8), s3 = _mm256_loadu_pd(mom + 12);
-            const __m256d z = _mm256_setzero_pd(), vmx = _mm256_set1_pd(mx);
-            const __m256d vmy = _mm256_set1_pd(my), vinv = _mm256_set1_pd(inv);
-            for (; i + 4 <= n; i += 4) {
-                /* (x0 y0 x1 y1), (x2 y2 x3 y3) -> (x0 y0 x2 y2), (x1 y1 x3 y3) -> x, y */
-                const __m256d p01 = _mm256_loadu_pd(pts + 2 * i);
-                const __m256d p23 = _mm256_loadu_pd(pts + 2 * i + 4);
-                const __m256d p02 = _mm256_permute2f128_pd(p01, p23, 0x20);
-                const __m256d p13 = _mm256_permute2f128_pd(p01, p23, 0x31);
-                const __m256d vx = _mm256_mul_pd(
-                    _mm256_sub_pd(_mm256_unpacklo_pd(p02, p13), vmx), vinv);
-                const __m256d vy = _mm256_mul_pd(
-                    _mm256_sub_pd(_mm256_unpackhi_pd(p02, p13), vmy), vinv);
-                const __m256d vxx = _mm256_mul_pd(vx, vx), vxy = _mm256_mul_pd(vx, vy);
-                const __m256d vyy = _mm256_mul_pd(vy, vy);
-                s0 = labauto_add_points(s0, vx, vy, vxx, vxy);
-                s1 = labauto_add_points(s1, vyy, _mm256_mul_pd(vxx, vx), _mm256_mul_pd(vxx, vy),
-                                        _mm256_mul_pd(vx, vyy));
-                s2 = labauto_add_points(s2, _mm256_mul_pd(vyy, vy), _mm256_mul_pd(vxx, vxx),
-                                        _mm256_mul_pd(vxx, vxy), _mm256_mul_pd(vxx, vyy));
-                s3 = labauto_add_points(s3, _mm256_mul_pd(vxy, vyy), _mm256_mul_pd(vyy, vyy),
-                                        z, z);
-            }
-            _mm256_storeu_pd(mom, s0);
-            _mm256_storeu_pd(mom + 4, s1);
-            _mm256_storeu_pd(mom + 8, s2);
-            _mm256_storeu_pd(mom + 12, s3);
-        }
-    #endif
-        for (; i < n; i++) {  /* the rest (or every point without AVX) */
+        for (; i < n; i++) {
             x = (pts[2 * i] - mx) * inv;
             y = (pts[2 * i + 1] - my) * inv;
             xx = x * x;

@@ -13,12 +13,12 @@ then computes
 * the convex hull (monotone chain after a natural merge sort: an ordered contour is made of a
   few x-monotone runs, and the sort is handed the points starting at the last run, which on a
   closed contour usually goes on into the first) and the minimum-area box around it (rotating
-  calipers, each caliper's next four heights and three steps at once, :func:`_rise3`: with
-  AVX2 in one vector product and one comparison); the hull's perimeter from the box's edges;
+  calipers, each caliper's next four heights and three steps at once, :func:`_rise3`); the
+  hull's perimeter from the box's edges;
 * optionally the Fourier coefficients of ``r`` and ``r^-2`` about the centre, exact per edge
   (see :func:`_series`), harmonic by harmonic in vectorised passes over all vertices and edges;
-  the sums over the edges run in LANES partial sums (added up in a fixed order), and atan2 and
-  log in branch-free versions that vectorise (:func:`_atan2`, :func:`_log`: 1-2 ulp).
+  the sums over the edges run in LANES partial sums (added up in a fixed order); atan2 and log
+  are the C library's.
 
 Compiled with ``-fno-math-errno`` (second line) so that loops with ``sqrt`` vectorise, and
 ``-fno-trapping-math`` so that selects (``a if c else b``) on computed values vectorise too (it
@@ -29,7 +29,7 @@ so a contour's results do not depend on the other contours of the batch or the t
 """
 
 from cython.parallel cimport parallel, prange
-from libc.math cimport INFINITY, NAN, copysign, fabs, isfinite, nearbyint, sqrt
+from libc.math cimport INFINITY, NAN, atan2, fabs, isfinite, log, nearbyint, sqrt
 from libc.stdint cimport int64_t, uint64_t, uintptr_t
 from libc.stdlib cimport free, malloc
 from libc.string cimport memcpy
@@ -311,28 +311,12 @@ cdef inline double _dot(const double* p, const double* o, double ux, double uy) 
 
 cdef extern from *:
     """
-    #if defined(__AVX2__)
-    #include <immintrin.h>
-    #endif
     /* The heights d_k = (p[0] - o[0]) ux + (p[1] - o[1]) uy of the four points p = h + 2 k
        (k = 0..3, as _dot rounds them: the same products and sum on every path); returns how
-       many of the steps 0 -> 1, 1 -> 2, 2 -> 3 in a row do not go down (0..3) and d_3 in *d3.
-       AVX2: the four heights in two vector products and one pairwise add, the three
-       comparisons in one; elsewhere plain code. */
+       many of the steps 0 -> 1, 1 -> 2, 2 -> 3 in a row do not go down (0..3) and d_3 in *d3,
+       without branches. */
     static inline int labauto_rise3(const double* h, const double* o, double ux, double uy,
                                     double* d3) {
-    #if defined(__AVX2__)
-        const __m256d o2 = _mm256_setr_pd(o[0], o[1], o[0], o[1]);
-        const __m256d u2 = _mm256_setr_pd(ux, uy, ux, uy);
-        const __m256d a = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(h), o2), u2);
-        const __m256d b = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(h + 4), o2), u2);
-        /* hadd: (d0, d2, d1, d3); e = (d0, d1, d2, d3); f = (d1, d2, d3, d3) */
-        const __m256d e = _mm256_permute4x64_pd(_mm256_hadd_pd(a, b), 0xD8);
-        const __m256d f = _mm256_permute4x64_pd(e, 0xF9);
-        const int down = _mm256_movemask_pd(_mm256_cmp_pd(f, e, _CMP_LT_OQ));
-        *d3 = _mm256_cvtsd_f64(_mm256_permute4x64_pd(e, 3));
-        return __builtin_ctz(down | 8);
-    #else
         const double d0 = (h[0] - o[0]) * ux + (h[1] - o[1]) * uy;
         const double d1 = (h[2] - o[0]) * ux + (h[3] - o[1]) * uy;
         const double d2 = (h[4] - o[0]) * ux + (h[5] - o[1]) * uy;
@@ -340,7 +324,6 @@ cdef extern from *:
         const int s1 = !(d1 < d0), s2 = s1 & !(d2 < d1), s3 = s2 & !(e3 < d2);
         *d3 = e3;
         return s1 + s2 + s3;
-    #endif
     }
     """
     int _rise3 "labauto_rise3"(
@@ -579,70 +562,6 @@ cdef int _descriptors(
 # ------------------------------------------------------------------------------ polar series
 
 
-cdef inline double _log(double x) noexcept nogil:
-    """Natural logarithm of a normal positive x, to 1 ulp, in branch-free code that vectorises
-    (fdlibm's e_log.c: x = 2^k (1 + f) with 1 + f in [sqrt(2)/2, sqrt(2)), log(1 + f) from
-    s = f / (2 + f) and a minimax polynomial in s^2). Not for 0, subnormals, inf or NaN."""
-    cdef uint64_t u
-    cdef int64_t hx, k
-    cdef double f, hfsq, s, z, w, t1, t2, dk
-    memcpy(&u, &x, 8)
-    hx = <int64_t>(u >> 32) + (0x3ff00000 - 0x3fe6a09e)
-    k = (hx >> 20) - 0x3ff
-    hx = (hx & 0x000fffff) + 0x3fe6a09e
-    u = (<uint64_t>hx << 32) | ((u << 32) >> 32)
-    memcpy(&f, &u, 8)
-    f -= 1.0
-    k += <int64_t>0x43380000 << 32  # k as a double: 1.5 * 2^52 + k, less 1.5 * 2^52 (exact;
-    memcpy(&dk, &k, 8)  # an integer add, where a conversion of int64 would need AVX-512)
-    dk -= 6755399441055744.0
-    hfsq = 0.5 * f * f
-    s = f / (2.0 + f)
-    z = s * s
-    w = z * z
-    t1 = w * (3.999999999940941908e-01 + w * (2.222219843214978396e-01
-                                              + w * 1.531383769920937332e-01))
-    t2 = z * (6.666666666666735130e-01 + w * (2.857142874366239149e-01
-                                              + w * (1.818357216161805012e-01
-                                                     + w * 1.479819860511658591e-01)))
-    return (
-        s * (hfsq + (t2 + t1)) + dk * 1.90821492927058770002e-10 - hfsq + f
-        + dk * 6.93147180369123816490e-01
-    )
-
-
-cdef inline double _atan2(double y, double x) noexcept nogil:
-    """atan2(y, x) of finite y, x to 2 ulp, in branch-free code that vectorises (Cephes' atan:
-    the ratio of the smaller to the larger of |x|, |y| in [0, 1], above 0.66 reduced by pi/4,
-    then a rational function; pi/2 - a, pi - a and the sign of y place it)."""
-    cdef double ax = fabs(x), ay = fabs(y), t, z, pz, qz, a, b
-    cdef bint swap = ay > ax
-    cdef bint x_neg = x < 0.0
-    cdef double lo = ax if swap else ay
-    cdef double hi = ay if swap else ax
-    cdef bint big = lo > 0.66 * hi  # atan(lo / hi) = pi/4 + atan((lo - hi) / (lo + hi))
-    cdef double num_big = lo - hi, den_big = lo + hi
-    cdef double num = num_big if big else lo
-    cdef double den = den_big if big else hi
-    den = den if den > 0.0 else 1.0  # x = y = 0: 0
-    t = num / den
-    z = t * t
-    pz = (((-8.750608600031904122785e-1 * z - 1.615753718733365076637e1) * z
-           - 7.500855792314704667340e1) * z - 1.228866684490136173410e2) * z \
-        - 6.485021904942025371773e1
-    qz = ((((z + 2.485846490142306297962e1) * z + 1.650270098316988542046e2) * z
-           + 4.328810604912902668951e2) * z + 4.853903996359136964868e2) * z \
-        + 1.945506571482613964425e2
-    a = t + t * (z * pz / qz)
-    b = 0.78539816339744830962 + (a + 3.061616997868382943e-17)  # pi/4 in two parts
-    a = b if big else a
-    b = (1.57079632679489661923 - a) + 6.123233995736765886e-17  # pi/2 - a
-    a = b if swap else a
-    b = (3.14159265358979323846 - a) + 1.2246467991473531772e-16  # pi - a
-    a = b if x_neg else a
-    return copysign(a, y)
-
-
 cdef void _vertex_powers(
     cdouble_r wx, cdouble_r wy, double_r pr, double_r pi, Py_ssize_t nv,
 ) noexcept nogil:
@@ -785,7 +704,7 @@ cdef void _edge_terms(
             s0 = (y0 * nx - x0 * ny) * ir0
             c1 = d * ir1
             s1 = (y1 * nx - x1 * ny) * ir1
-            du = _atan2(s1 * c0 - c1 * s0, c1 * c0 + s1 * s0)  # each edge subtends less than pi
+            du = atan2(s1 * c0 - c1 * s0, c1 * c0 + s1 * s0)  # each edge subtends less than pi
             du = du if ok else 0.0
             a_net[l] += du
             a_total[l] += fabs(du)
@@ -810,7 +729,7 @@ cdef void _edge_terms(
             b0 = c0 if s0 >= 0.0 else 1.0 - s0
             a1 = 1.0 + s1 if s1 >= 0.0 else c1
             b1 = c1 if s1 >= 0.0 else 1.0 - s1
-            k0 = _log((a1 * b0) / (b1 * a0))
+            k0 = log((a1 * b0) / (b1 * a0))
             k1 = lr[i + 1] - lr[i]  # log(cos u0 / cos u1)
             q0r[i] = k0  # Q_0
             q0i[i] = 0.0
@@ -866,7 +785,7 @@ cdef int _series(
 
     Order of the work: passes over all vertices or all edges, each a vectorised loop (the
     vertices about the centre; the edges' normals; the edges' du, weights, Q_0 and Q_1 with
-    :func:`_atan2` and :func:`_log`), then one pass per harmonic m = 1, 2, ...: every vertex's
+    atan2 and log), then one pass per harmonic m = 1, 2, ...: every vertex's
     w^m from w^{m-1} (:func:`_vertex_powers`), the edges' sums H_m and A_m and, for r, every
     edge's D_m and Q_{m+1} (:func:`_edge_recurrence`). Each sum runs in LANES partial sums.
     """
@@ -953,7 +872,7 @@ cdef int _series(
         # log r = -log(1 / r): 1 / r is a normal number (r^2 a finite double); an infinite
         # 1 / r (a vertex on the centre) gives a wrong log, read only by skipped edges
         for i in range(nv):
-            lr[i] = -_log(gir[i])
+            lr[i] = -log(gir[i])
     else:
         for i in range(nv):
             lr[i] = 0.0
