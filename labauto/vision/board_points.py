@@ -30,7 +30,7 @@ from labauto.vision.boards import Board, CodedBoard, GridBoard
 from labauto.vision.concentric import projected_center
 from labauto.vision.detector import DetectorParams, detect
 from labauto.vision.ellipse import Ellipse
-from labauto.vision.gradient import as_uint8_image
+from labauto.vision.image import as_image
 from labauto.vision.markers import detect_markers
 
 
@@ -73,7 +73,7 @@ def _empty(found: int, reason: str, foreign: int = 0) -> BoardView:
 
 def find_board_points(image: np.ndarray, board: Board) -> BoardView:
     """Find ``board``'s points in ``image`` (see the module docstring)."""
-    img = as_uint8_image(image)
+    img = as_image(image)
     grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
     if isinstance(board, CodedBoard):
         return _coded(grey, board)
@@ -165,7 +165,7 @@ def order_grid(centres: np.ndarray, board: GridBoard) -> np.ndarray | None:
 
 def opencv_circle_grid(image: np.ndarray, board: GridBoard) -> np.ndarray | None:
     """The baseline: ``cv2.findCirclesGrid`` on the image (None when it finds no grid)."""
-    img = as_uint8_image(image)
+    img = as_image(image)
     grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
     if board.polarity == "light-on-dark":
         grey = 255 - grey

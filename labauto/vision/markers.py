@@ -57,7 +57,7 @@ from labauto.vision.contours import Contours
 from labauto.vision.detector import DetectorParams, extract_contours, validate_params
 from labauto.vision.ellipse import Ellipse
 from labauto.vision.ellipse_fit import fit_selected_ellipses
-from labauto.vision.gradient import as_uint8_image
+from labauto.vision.image import as_image
 from labauto.vision.marker_codes import N_BITS, RING_OUTER, decode_words
 from labauto.vision.marker_codes import warm as warm_codes
 from labauto.vision.marker_edges import affine_frames, marker_centers, refine_circles
@@ -236,7 +236,7 @@ def find_markers(image: np.ndarray, params: MarkerParams = MarkerParams()) -> Ma
     """:func:`detect_markers` with its parameters as one value, and the timing."""
     warm_codes()  # the one-off code table is not part of an image's time
     start = time.perf_counter()
-    img = as_uint8_image(image)
+    img = as_image(image)
     grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
     contours = extract_contours(grey, params.detector_params())
     markers = _markers(grey, contours, params) if len(contours) else []
