@@ -208,7 +208,7 @@ def _hold_once(robot: GrblRobot, target: float) -> tuple[list[int | None], GrblS
     """Move towards ``target``, hold, poll until Hold:0 (10 s); return the substates seen."""
     robot.move_to(target, 0.0, wait=False)  # grbl-sim moves at ~1/5 of real time
     assert wait_until(lambda: poll_status(robot).state == "Run", 10.0)
-    time.sleep(0.2)
+    time.sleep(0.05)
     robot.feed_hold()
     substates: list[int | None] = []
     deadline = time.monotonic() + 10.0
@@ -231,8 +231,9 @@ def test_feed_hold_goes_hold_1_then_hold_0_and_resumes(robot: GrblRobot) -> None
     for attempt, target in enumerate((-30.0, -5.0, -30.0)):
         tries = attempt + 1
         substates, report = _hold_once(robot, target)
-        if substates and substates[-1] == 0:
-            break
+        position = report.position or (target, 0.0, 0.0)
+        if substates and substates[-1] == 0 and abs(target - position[0]) > 0.02:
+            break  # held, and before the end of the move (an idle host may finish it first)
         robot.soft_reset()
         robot.unlock()
     assert substates[0] == 1 and substates[-1] == 0, (tries, substates[-3:], report.raw)
