@@ -43,9 +43,10 @@ Id-swap guard
     one nearest the prediction is taken for a track that was seen in the previous frame, and
     for a new track the id is not reported at all unless the places are within the marker's
     own radius (the same marker found twice); (3) a detection of a tracked id (seen in the
-    previous frame) further than ``gate_factor`` window half-sizes from its prediction is taken
-    for a misread code, not for a jump, and rejected. So a misread code can at worst lose a
-    marker for a frame; it cannot move another marker's id.
+    previous frame) further than ``gate_factor`` window half-sizes from its prediction and
+    inside another marker's window is taken for that marker's code misread, not for a jump,
+    and rejected (far from every other marker it is taken for a jump). So a misread code can
+    at worst lose a marker for a frame; it cannot move another marker's id.
 
 The detector is any function ``detect(image) -> markers`` whose markers have ``id``,
 ``centroid`` (the DES centroid, the paper's choice and the default centre), ``center`` (the
@@ -188,8 +189,8 @@ class MarkerTracker:
     coast_frames : int
         Frames a lost marker is still searched in a window around its prediction.
     gate_factor : float
-        A tracked id found further than this many window half-sizes from its prediction is
-        rejected as a misread.
+        A tracked id found further than this many window half-sizes from its prediction, in
+        another marker's window, is rejected as a misread.
     **detect_options
         Passed to the default detector.
 
@@ -361,12 +362,11 @@ class MarkerTracker:
                 predicted = self._prediction(track)
                 distances = [float(np.linalg.norm(p[0] - predicted)) for p in places]
                 best = int(np.argmin(distances))
-                if track.missed == 0 and distances[best] > self.gate_factor * self._half_size(
-                    track
-                ):
+                position, extent = places[best]
+                far = distances[best] > self.gate_factor * self._half_size(track)
+                if track.missed == 0 and far and self._near_other_track(mid, position):
                     self.stats.rejected_jumps += 1
                     continue
-                position, extent = places[best]
             else:
                 position, extent = places[0]
                 spread = max(float(np.linalg.norm(p[0] - position)) for p in places)
@@ -375,6 +375,15 @@ class MarkerTracker:
                     continue
             found[mid] = _Found(position, extent)
         return found
+
+    def _near_other_track(self, mid: int, position: np.ndarray) -> bool:
+        """True when ``position`` is inside the window of another id's track."""
+        for other in self._tracks.values():
+            if other.id != mid and other.missed <= self.coast_frames:
+                distance = float(np.max(np.abs(position - self._prediction(other))))
+                if distance <= self._half_size(other):
+                    return True
+        return False
 
     # -- tracks --------------------------------------------------------------------------------
     def _apply(self, found: dict[int, _Found], index: int) -> None:
