@@ -12,6 +12,6 @@ try:
 except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0"
 
-from labauto.api import analyze_plate, detect
+from labauto.api import analyze_plate, detect, detect_markers
 
-__all__ = ["__version__", "analyze_plate", "detect"]
+__all__ = ["__version__", "analyze_plate", "detect", "detect_markers"]

@@ -87,3 +87,23 @@ def analyze_plate(
 
     application = (plugins or default_plugins()).registry.get("applications", "plate")
     return application(_as_image(image), PlateParams(**params))
+
+
+def detect_markers(image: np.ndarray | str | Path, **options: Any):
+    """Find the coded markers in an image (the paper's section 4.2).
+
+    Parameters
+    ----------
+    image : ndarray or path
+        BGR (H, W, 3) or grey (H, W) image, or the path of an image file.
+    **options
+        Fields of ``labauto.vision.markers.MarkerParams``.
+
+    Returns
+    -------
+    list of Marker
+        Sorted by id; ``Marker.to_dict()`` gives one entry of ``labauto markers detect --json``.
+    """
+    from labauto.vision.markers import detect_markers as _detect_markers
+
+    return _detect_markers(_as_image(image), **options)

@@ -1,0 +1,421 @@
+"""Coded circular markers found by the DES detector (the paper's section 4.2).
+
+Pipeline, as in the paper ("before we apply any ellipse fitting procedures to all possible
+objects, we first segment obviously elliptical shapes from artifacts using our DES approach"):
+
+1. **Contours** of the grey image by our Canny detector (:func:`labauto.vision.detector.
+   extract_contours`, sub-pixel edges).
+2. **DES prefilter**: the shape angle D_alpha (eq. 3) with the centroid-inside test
+   (:func:`labauto.vision.shape_angle.shape_angles`); only DES go on, so rectangles, lines,
+   ring sectors and other artefacts are never fitted.
+3. **Geometric ellipse fit** of every DES of a plausible size (orthogonal distances, Ahn's
+   method, :func:`labauto.vision.ellipse_fit.fit_selected_ellipses`).
+4. **Code read** in the ellipse's rectified frame: the affine map taking the unit circle onto the
+   fitted ellipse takes the marker's plane, to first order, onto the image (up to an unknown
+   rotation, which the rotation-invariant code does not care about). The image is sampled
+   (bilinear) on circles of radii 2.3, 2.5, 2.7 (the code ring, 2-3 centre radii) at 8 samples
+   per sector, on the centre circle (ink level) and on the paper gap and quiet zone (paper
+   level). Samples are normalised to 0 (ink) .. 1 (paper), so dark-on-light and light-on-dark
+   markers read alike and uneven light only matters through the local levels. The sector
+   phase is the one of the 8 that gives the most decisive bits (the ends of each sector are
+   left out); a bit is ink when its mean is below 0.5. The word must be a code of
+   :mod:`labauto.vision.marker_codes` (even weight, so one wrong bit never gives another id),
+   the ink-paper contrast at least ``min_contrast`` and every bit at least ``min_margin`` from
+   the threshold (in units of half the contrast): rectangles, plain dots and artefacts get no
+   id.
+5. **Perspective-bias correction**: the edge points of the code ring that lie on its inner and
+   outer circles (radius within 0.25 centre radii, image gradient within 15 degrees of the
+   radial direction, which drops the sector ends) are fitted with one ellipse each; the
+   projected centre of the three concentric circles is the eigenvector construction of
+   :mod:`labauto.vision.concentric`. A ring fit with fewer than 24 points or an rms over 0.35 px
+   is not used; with no usable ring fit the centre is the centre-circle ellipse's centre and
+   ``bias_corrected`` is False.
+
+``score`` is the smallest bit margin (0..1) times the contrast share (contrast / 255, capped at
+1 after doubling): 1 is a perfect read.
+
+Coordinates: pixels, origin at the centre of the top-left pixel, x right, y down. Works on any
+sub-image (a tracker's window): positions are in that array's pixels.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, fields, replace
+
+import cv2
+import numpy as np
+
+from labauto.vision.concentric import projected_center
+from labauto.vision.contours import Contours
+from labauto.vision.detector import DetectorParams, extract_contours, validate_params
+from labauto.vision.ellipse import Ellipse
+from labauto.vision.ellipse_fit import fit_ellipses_geometric_batch, fit_selected_ellipses
+from labauto.vision.gradient import as_uint8_image
+from labauto.vision.marker_codes import N_BITS, QUIET_RADIUS, RING_INNER, RING_OUTER, decode_words
+from labauto.vision.shape_angle import shape_angles
+
+#: Samples per sector along the ring, and the ring radii sampled (centre radii).
+SAMPLES_PER_BIT = 8
+READ_RADII = (2.3, 2.5, 2.7)
+#: Radii (centre radii) sampled for the ink level and the paper level.
+INK_RADII = (0.0, 0.35, 0.6)
+PAPER_RADII = (1.5, 3.35)
+#: Ring-edge point selection and fit acceptance for the bias correction.
+EDGE_BAND = 0.25
+EDGE_MAX_ANGLE_DEG = 15.0
+MIN_EDGE_POINTS = 24
+MAX_EDGE_RMS = 0.35
+
+
+@dataclass(frozen=True)
+class MarkerParams:
+    """Tunables of :func:`detect_markers`.
+
+    Attributes
+    ----------
+    blur_sigma, canny_low, canny_high : float
+        Of the contour detector (:class:`labauto.vision.detector.DetectorParams`).
+    des_threshold_deg : float
+        D_alpha threshold of the DES prefilter (60: ellipses down to 1:4, a 75 degree tilt).
+    min_radius_px, max_radius_px : float
+        Range of the centre circle's semi-major axis.
+    min_contrast : float
+        Least ink-paper difference (grey levels) of a marker.
+    min_margin : float
+        Least distance of every bit from the threshold, in half-contrasts (0..1).
+    correct_bias : bool
+        Fit the code ring's edges and correct the centre for perspective.
+    """
+
+    blur_sigma: float = 0.7
+    canny_low: float = 30.0
+    canny_high: float = 80.0
+    des_threshold_deg: float = 60.0
+    min_radius_px: float = 3.0
+    max_radius_px: float = 400.0
+    min_contrast: float = 25.0
+    min_margin: float = 0.3
+    correct_bias: bool = True
+
+    def detector_params(self) -> DetectorParams:
+        """The contour detector's parameters."""
+        return DetectorParams(
+            blur_sigma=self.blur_sigma,
+            canny_low=self.canny_low,
+            canny_high=self.canny_high,
+            des_threshold_deg=self.des_threshold_deg,
+            classify=False,
+        )
+
+
+@dataclass(frozen=True)
+class Marker:
+    """One coded marker found in an image.
+
+    Attributes
+    ----------
+    id : int
+        The marker's id (index in :func:`labauto.vision.marker_codes.code_book`).
+    center : (x, y)
+        Image of the marker's centre: bias-corrected when ``bias_corrected``, else the centre
+        of ``ellipse``.
+    centroid : (x, y)
+        Centre of gravity of the centre circle's contour (the DES centroid).
+    ellipse : Ellipse
+        Geometric fit of the centre circle's edge.
+    score : float
+        Read quality in (0, 1].
+    rotation_deg : float
+        Direction of the code's bit 0 in the rectified frame (degrees from +x toward +y).
+    bias_corrected : bool
+        ``center`` comes from the concentric ring fits.
+    ring_ellipses : tuple of Ellipse
+        Fits of the code ring's inner and outer edges that were used (may be empty).
+    """
+
+    id: int
+    center: tuple[float, float]
+    centroid: tuple[float, float]
+    ellipse: Ellipse
+    score: float
+    rotation_deg: float = 0.0
+    bias_corrected: bool = False
+    ring_ellipses: tuple[Ellipse, ...] = ()
+
+    def to_dict(self) -> dict:
+        """JSON form: ``{"id", "center", "centroid", "ellipse", "score", "bias_corrected"}``."""
+        return {
+            "id": int(self.id),
+            "center": [float(self.center[0]), float(self.center[1])],
+            "centroid": [float(self.centroid[0]), float(self.centroid[1])],
+            "ellipse": self.ellipse.to_dict(),
+            "score": float(self.score),
+            "bias_corrected": bool(self.bias_corrected),
+        }
+
+    def shifted(self, dx: float, dy: float) -> Marker:
+        """The same marker with every position moved by ``(dx, dy)`` (window to full image)."""
+
+        def move(e: Ellipse) -> Ellipse:
+            return Ellipse((e.center[0] + dx, e.center[1] + dy), e.axes, e.angle)
+
+        return replace(
+            self,
+            center=(self.center[0] + dx, self.center[1] + dy),
+            centroid=(self.centroid[0] + dx, self.centroid[1] + dy),
+            ellipse=move(self.ellipse),
+            ring_ellipses=tuple(move(e) for e in self.ring_ellipses),
+        )
+
+
+@dataclass(frozen=True)
+class MarkerResult:
+    """The markers of one image and the time the detection took."""
+
+    width: int
+    height: int
+    timing_ms: float
+    markers: list[Marker]
+
+    def to_dict(self) -> dict:
+        """``{"width", "height", "timing_ms", "markers": [...]}``."""
+        return {
+            "width": int(self.width),
+            "height": int(self.height),
+            "timing_ms": float(self.timing_ms),
+            "markers": [m.to_dict() for m in self.markers],
+        }
+
+
+def marker_params(**options: object) -> MarkerParams:
+    """Build :class:`MarkerParams` from keyword options, naming an unknown one."""
+    known = {f.name for f in fields(MarkerParams)}
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise ValueError(f"unknown marker option(s) {unknown}; known: {sorted(known)}")
+    params = MarkerParams(**options)  # type: ignore[arg-type]
+    if not 0 < params.min_radius_px <= params.max_radius_px:
+        raise ValueError(
+            f"need 0 < min_radius_px <= max_radius_px, got {params.min_radius_px}, "
+            f"{params.max_radius_px}"
+        )
+    if not 0 <= params.min_margin < 1:
+        raise ValueError(f"min_margin must be in [0, 1), got {params.min_margin}")
+    validate_params(params.detector_params())
+    return params
+
+
+def detect_markers(image: np.ndarray, **options: object) -> list[Marker]:
+    """Find the coded markers in an image.
+
+    Parameters
+    ----------
+    image : np.ndarray
+        HxW grey or HxWx3 BGR image (uint8, or float on a 0-255 scale); any sub-image works.
+    **options
+        Fields of :class:`MarkerParams`.
+
+    Returns
+    -------
+    list of Marker
+        Sorted by id; at most one marker per id (the best read when an id is seen twice).
+    """
+    return find_markers(image, marker_params(**options)).markers
+
+
+def find_markers(image: np.ndarray, params: MarkerParams = MarkerParams()) -> MarkerResult:
+    """:func:`detect_markers` with its parameters as one value, and the timing."""
+    start = time.perf_counter()
+    img = as_uint8_image(image)
+    grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
+    contours = extract_contours(grey, params.detector_params())
+    markers = _markers(grey, contours, params) if len(contours) else []
+    elapsed = (time.perf_counter() - start) * 1e3
+    return MarkerResult(grey.shape[1], grey.shape[0], elapsed, markers)
+
+
+# ------------------------------------------------------------------------------ the steps
+
+
+def _frames(ellipses: list[Ellipse]) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (K, 2) and affine maps (K, 2, 2) taking the unit circle onto each ellipse."""
+    centres = np.array([e.center for e in ellipses], np.float64)
+    theta = np.deg2rad([e.angle for e in ellipses])
+    axes = np.array([e.axes for e in ellipses], np.float64)
+    c, s = np.cos(theta), np.sin(theta)
+    maps = np.empty((len(ellipses), 2, 2))
+    maps[:, 0, 0], maps[:, 0, 1] = c * axes[:, 0], -s * axes[:, 1]
+    maps[:, 1, 0], maps[:, 1, 1] = s * axes[:, 0], c * axes[:, 1]
+    return centres, maps
+
+
+def _sample(
+    grey: np.ndarray, centres: np.ndarray, maps: np.ndarray, unit: np.ndarray
+) -> np.ndarray:
+    """Bilinear grey values at ``centre + map @ unit`` for every frame: (K, M)."""
+    pts = centres[:, None, :] + np.einsum("kij,mj->kmi", maps, unit)
+    mx = np.ascontiguousarray(pts[..., 0], np.float32)
+    my = np.ascontiguousarray(pts[..., 1], np.float32)
+    out = cv2.remap(grey, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out.astype(np.float64)
+
+
+def _circle(radii: tuple[float, ...], n: int) -> np.ndarray:
+    t = 2.0 * np.pi * (np.arange(n) + 0.5) / n
+    return np.concatenate([np.column_stack((r * np.cos(t), r * np.sin(t))) for r in radii])
+
+
+def _read_codes(
+    grey: np.ndarray, ellipses: list[Ellipse], params: MarkerParams
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ids (-1: no code), scores, bit-0 directions (rad) and frames' ok flags of the ellipses."""
+    centres, maps = _frames(ellipses)
+    n_ring = N_BITS * SAMPLES_PER_BIT
+    grey32 = grey.astype(np.float32)
+    ring = _sample(grey32, centres, maps, _circle(READ_RADII, n_ring))
+    ring = ring.reshape(len(ellipses), len(READ_RADII), n_ring).mean(axis=1)
+    ink = np.median(_sample(grey32, centres, maps, _circle(INK_RADII, 8)), axis=1)
+    paper = np.median(_sample(grey32, centres, maps, _circle(PAPER_RADII, 24)), axis=1)
+    contrast = paper - ink
+    safe = np.where(np.abs(contrast) < 1e-9, 1e-9, contrast)
+    level = (ring - ink[:, None]) / safe[:, None]  # 0 ink .. 1 paper
+    # per phase p: sector k covers samples k*S + p .. k*S + p + S - 1; drop one at each end
+    s = SAMPLES_PER_BIT
+    best_margin = np.full(len(ellipses), -np.inf)
+    best_bits = np.zeros((len(ellipses), N_BITS), bool)
+    best_phase = np.zeros(len(ellipses), np.int64)
+    for p in range(s):
+        rolled = np.roll(level, -p, axis=1).reshape(len(ellipses), N_BITS, s)[:, :, 1:-1]
+        means = rolled.mean(axis=2)
+        margin = np.min(np.abs(means - 0.5), axis=1) * 2.0
+        better = margin > best_margin
+        best_margin = np.where(better, margin, best_margin)
+        best_bits[better] = means[better] < 0.5
+        best_phase[better] = p
+    words = (best_bits.astype(np.int64) << np.arange(N_BITS)).sum(axis=1)
+    ids, turns = decode_words(words)
+    ok = (np.abs(contrast) >= params.min_contrast) & (best_margin >= params.min_margin)
+    ids = np.where(ok, ids, -1)
+    score = best_margin * np.minimum(np.abs(contrast) * 2.0 / 255.0, 1.0)
+    # read bit i starts at angle (i*S + p) * 2 pi / n_ring; the code's bit 0 is read bit -turns
+    bit0 = ((-turns) % N_BITS * s + best_phase) * 2.0 * np.pi / n_ring
+    return ids, score, bit0, ok
+
+
+def _candidates(grey: np.ndarray, contours: Contours, params: MarkerParams):
+    angles = shape_angles(contours.points, contours.gradients, contours.offsets, contours.closed)
+    des = angles.is_des(params.des_threshold_deg)
+    # cheap size test before fitting: the DES's extent from its area
+    radius = np.sqrt(np.maximum(angles.area, 0.0) / np.pi)
+    des &= (radius >= params.min_radius_px * 0.5) & (radius <= params.max_radius_px * 1.2)
+    fits = fit_selected_ellipses(contours.points, contours.offsets, des, max_iter=10, tol=1e-7)
+    h, w = grey.shape
+    keep = []
+    for k, e in enumerate(fits):
+        if e is None:
+            continue
+        a, b = e.axes
+        if not params.min_radius_px <= a <= params.max_radius_px or b < 0.25 * a:
+            continue
+        reach = RING_OUTER * a + 1
+        cx, cy = e.center
+        if cx - reach < 0 or cy - reach < 0 or cx + reach > w - 1 or cy + reach > h - 1:
+            continue  # the code ring leaves the image
+        keep.append(k)
+    return angles, fits, keep
+
+
+def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list[Marker]:
+    angles, fits, keep = _candidates(grey, contours, params)
+    if not keep:
+        return []
+    ellipses = [fits[k] for k in keep]
+    ids, score, bit0, _ = _read_codes(grey, ellipses, params)
+    best: dict[int, int] = {}
+    for j, marker_id in enumerate(ids.tolist()):
+        if marker_id >= 0 and (marker_id not in best or score[j] > score[best[marker_id]]):
+            best[marker_id] = j
+    chosen = sorted(best.items())
+    rings = (
+        _ring_fits(contours, angles.centroid, [ellipses[j] for _, j in chosen])
+        if params.correct_bias
+        else [() for _ in chosen]
+    )
+    out = []
+    for (marker_id, j), ring in zip(chosen, rings, strict=True):
+        e = ellipses[j]
+        centre = projected_center([e, *ring]) if ring else None
+        cx, cy = angles.centroid[keep[j]]
+        out.append(
+            Marker(
+                id=marker_id,
+                center=centre if centre is not None else e.center,
+                centroid=(float(cx), float(cy)),
+                ellipse=e,
+                score=float(score[j]),
+                rotation_deg=float(np.degrees(bit0[j])),
+                bias_corrected=centre is not None,
+                ring_ellipses=tuple(ring) if centre is not None else (),
+            )
+        )
+    return out
+
+
+def _ring_fits(
+    contours: Contours, centroids: np.ndarray, ellipses: list[Ellipse]
+) -> list[tuple[Ellipse, ...]]:
+    """Ellipses of the code ring's inner and outer edges of every marker (bias correction)."""
+    if not ellipses:
+        return []
+    centres, maps = _frames(ellipses)
+    inverse = np.linalg.inv(maps)
+    lengths = contours.lengths
+    sets: list[np.ndarray] = []
+    owners: list[tuple[int, int]] = []
+    for m in range(len(ellipses)):
+        rel = np.einsum("ij,kj->ki", inverse[m], centroids - centres[m])
+        rho = np.hypot(rel[:, 0], rel[:, 1])
+        near = np.flatnonzero((rho > 1.3) & (rho < QUIET_RADIUS))
+        if near.size == 0:
+            continue
+        idx = np.concatenate(
+            [np.arange(contours.offsets[k], contours.offsets[k] + lengths[k]) for k in near]
+        )
+        pts = contours.points[idx]
+        grads = contours.gradients[idx].astype(np.float64)
+        u = (pts - centres[m]) @ inverse[m].T
+        r = np.hypot(u[:, 0], u[:, 1])
+        # the ellipse's normal at the point: inverse^T u (the gradient of |inverse (p - c)|^2)
+        normal = u @ inverse[m]
+        cosang = np.abs(np.sum(normal * grads, axis=1)) / (
+            np.hypot(normal[:, 0], normal[:, 1]) * np.hypot(grads[:, 0], grads[:, 1]) + 1e-12
+        )
+        radial = cosang >= np.cos(np.deg2rad(EDGE_MAX_ANGLE_DEG))
+        for which, radius in enumerate((RING_INNER, RING_OUTER)):
+            sel = radial & (np.abs(r - radius) < EDGE_BAND)
+            if np.count_nonzero(sel) >= MIN_EDGE_POINTS:
+                sets.append(pts[sel])
+                owners.append((m, which))
+    out: list[list[Ellipse]] = [[] for _ in ellipses]
+    if not sets:
+        return [()] * len(ellipses)
+    offsets = np.concatenate(([0], np.cumsum([len(s) for s in sets]))).astype(np.int64)
+    initial = np.array(
+        [
+            (
+                *ellipses[m].center,
+                ellipses[m].axes[0] * (RING_INNER, RING_OUTER)[w],
+                ellipses[m].axes[1] * (RING_INNER, RING_OUTER)[w],
+                ellipses[m].angle,
+            )
+            for m, w in owners
+        ]
+    )
+    fits = fit_ellipses_geometric_batch(
+        np.concatenate(sets), offsets, initial, max_iter=20, tol=1e-7
+    )
+    for (m, _), fit in zip(owners, fits, strict=True):
+        if fit is not None and fit.rms <= MAX_EDGE_RMS:
+            out[m].append(fit.ellipse)
+    return [tuple(e) for e in out]
