@@ -16,9 +16,10 @@ Prediction model
     estimate of the next one, and it follows a turn within one frame.
 Window size
     A square of half-size ``extent + margin_px + speed_gain * |v| * dt + grow_px * missed``
-    around the prediction. ``extent`` is the marker's own radius in the image (its fitted
-    ellipse's semi-major axis times ``extent_factor``, the ratio of the whole marker, code ring
-    included, to the ellipse the detector reports), so the window holds the whole marker
+    around the prediction. ``extent`` is what must be seen of the marker, its centre circle's
+    radius times ``extent_factor``: 1.6 by default (the centre circle and its edge, all the DES
+    centroid needs), 3.6 when the whole marker is read in the window (``fit=True`` or a detector
+    of one's own: code ring and quiet zone). So the window holds that much of the marker
     wherever it is within the allowance. The allowance is the prediction error the window
     tolerates: ``margin_px`` for an acceleration from standstill and for jitter, and a share of
     the speed (``speed_gain``; 0.5: the velocity may change by half between two frames) since
@@ -36,23 +37,38 @@ Full-frame search
     for ``coast_frames`` frames (searched in a window growing by ``grow_px`` per missed frame,
     which re-finds a marker after a short occlusion without waiting for the next full-frame
     search), then it is forgotten until a full-frame search finds it again.
+Searching
+    By default (DES centroids) a search finds the *centre candidates* of the searched pixels,
+    the DES of a centre circle's size, with contours and the shape angle only
+    (:func:`labauto.vision.marker_candidates.centre_candidates`, no fits, no code reads). A
+    candidate continues the track of a marker seen in the previous frame when it is the one
+    candidate near that marker's prediction (within the allowance, area-equivalent radius
+    within 0.6-1.6 of the marker's, the next candidate more than twice as far plus 2 px) and
+    near no other marker's prediction. Codes are read, by the whole detector in small windows
+    (:func:`~labauto.vision.marker_candidates.read_markers_at`), only where that does not
+    decide: a candidate two markers compete for or a marker with two candidates, a candidate
+    in the window of a lost (coasting) marker, and in a full-frame search every candidate no
+    marker took (new markers). With ``fit=True`` (fitted, bias-corrected centres) or a detector
+    of one's own, every search runs the whole detector on the searched pixels instead.
 Id-swap guard
-    A marker's identity is its decoded code: a detection can only continue the track of its
-    own id, never another's. Beyond that, (1) in a window only a detection of the window's own
-    id counts, and only inside the window; (2) when one id is found at more than one place, the
-    one nearest the prediction is taken for a track that was seen in the previous frame, and
-    for a new track the id is not reported at all unless the places are within the marker's
-    own radius (the same marker found twice); (3) a detection of a tracked id (seen in the
-    previous frame) further than ``gate_factor`` window half-sizes from its prediction and
-    inside another marker's window is taken for that marker's code misread, not for a jump,
-    and rejected (far from every other marker it is taken for a jump). So a misread code can
-    at worst lose a marker for a frame; it cannot move another marker's id.
+    A marker's identity is its decoded code: a coded detection can only continue the track of
+    its own id, never another's, and a track is taken up by position only from one frame to the
+    next (a marker seen in the previous frame, with one clear candidate that no other marker
+    claims); a lost marker is taken up again only by its code. Beyond that, (1) in a window only
+    a detection of the window's own id counts, and only inside the window; (2) when one id is
+    found at more than one place, the one nearest the prediction is taken for a track that was
+    seen in the previous frame, and for a new track the id is not reported at all unless the
+    places are within the marker's own radius (the same marker found twice); (3) a detection of
+    a tracked id (seen in the previous frame) further than ``gate_factor`` window half-sizes
+    from its prediction and inside another marker's window is taken for that marker's code
+    misread, not for a jump, and rejected (far from every other marker it is taken for a jump).
+    So a misread code can at worst lose a marker for a frame; it cannot move another marker's
+    id.
 
-The detector is any function ``detect(image) -> markers`` whose markers have ``id``,
-``centroid`` (the DES centroid, the paper's choice and the default centre), ``center`` (the
-fitted, bias-corrected centre, taken with ``fit=True``), ``ellipse`` (with ``axes``) and
-``score``; the default is :func:`labauto.vision.markers.detect_markers` (imported when first
-needed). It must work on any sub-image, as that detector does.
+A detector of one's own is any function ``detect(image) -> markers`` whose markers have
+``id``, ``centroid`` (the DES centroid, the paper's choice and the default centre), ``center``
+(the fitted, bias-corrected centre, taken with ``fit=True``) and ``ellipse`` (with ``axes``),
+as :func:`labauto.vision.markers.detect_markers` gives; it must work on any sub-image.
 """
 
 from __future__ import annotations
@@ -146,16 +162,19 @@ class _Track:
     id: int
     position: np.ndarray
     velocity: np.ndarray
-    extent: float
+    radius: float
     last_frame: int
     known_velocity: bool = False
     missed: int = 0
 
 
-@dataclass
-class _Found:
+@dataclass(frozen=True)
+class _Obs:
+    """A detection in frame pixels: a coded marker (``id``) or a centre candidate (``None``)."""
+
+    id: int | None
     position: np.ndarray
-    extent: float
+    radius: float
 
 
 @dataclass
@@ -165,6 +184,7 @@ class TrackerStats:
     frames: int = 0
     full_searches: int = 0
     fallbacks: int = 0
+    code_reads: int = 0
     rejected_jumps: int = 0
     ambiguous: int = 0
     window_pixels: list[int] = field(default_factory=list)
@@ -176,14 +196,16 @@ class MarkerTracker:
     Parameters
     ----------
     detect : callable, optional
-        ``detect(image) -> list of markers``; default
-        :func:`labauto.vision.markers.detect_markers` with ``detect_options``.
+        ``detect(image) -> list of markers`` run on every searched image instead of the
+        default search (centre candidates, codes read where needed).
     fit : bool
-        Report fitted, bias-corrected centres (``marker.center``) instead of DES centroids.
+        Report fitted, bias-corrected centres (``marker.center``, the whole detector on every
+        searched image) instead of DES centroids.
     full_interval : int
         A full-frame search every this many frames (1: every frame is searched whole).
-    extent_factor : float
-        Whole marker radius over the semi-major axis of the ellipse the detector reports.
+    extent_factor : float, optional
+        What of a marker a window must hold, in centre radii (default 1.6, or 3.6 when the
+        whole marker is detected in the window).
     margin_px, speed_gain, initial_speed_px, grow_px : float
         The window allowance (module docstring).
     coast_frames : int
@@ -192,7 +214,7 @@ class MarkerTracker:
         A tracked id found further than this many window half-sizes from its prediction, in
         another marker's window, is rejected as a misread.
     **detect_options
-        Passed to the default detector.
+        Fields of :class:`labauto.vision.markers.MarkerParams` for the built-in search.
 
     Examples
     --------
@@ -208,7 +230,7 @@ class MarkerTracker:
         *,
         fit: bool = False,
         full_interval: int = 10,
-        extent_factor: float = 3.0,
+        extent_factor: float | None = None,
         margin_px: float = 6.0,
         speed_gain: float = 0.5,
         initial_speed_px: float = 12.0,
@@ -217,10 +239,16 @@ class MarkerTracker:
         gate_factor: float = 4.0,
         **detect_options: Any,
     ) -> None:
+        from labauto.vision.marker_codes import QUIET_RADIUS
+        from labauto.vision.markers import find_markers, marker_params
+
         if full_interval < 1:
             raise ValueError(f"full_interval must be >= 1, got {full_interval}")
         if coast_frames < 0:
             raise ValueError(f"coast_frames must be >= 0, got {coast_frames}")
+        self._candidates = detect is None and not fit
+        if extent_factor is None:
+            extent_factor = 1.6 if self._candidates else QUIET_RADIUS
         for name, value in (
             ("extent_factor", extent_factor),
             ("margin_px", margin_px),
@@ -231,10 +259,15 @@ class MarkerTracker:
         ):
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+        if detect is not None and detect_options:
+            raise TypeError("detect_options are for the built-in search only")
+        self.params = marker_params(**detect_options)
         if detect is None:
-            detect = _default_detector(detect_options)
-        elif detect_options:
-            raise TypeError("detect_options are for the default detector only")
+            params = self.params
+
+            def detect(image: np.ndarray) -> Sequence[MarkerLike]:
+                return find_markers(image, params).markers
+
         self.detect = detect
         self.fit = fit
         self.full_interval = int(full_interval)
@@ -245,19 +278,15 @@ class MarkerTracker:
         self.grow_px = float(grow_px)
         self.coast_frames = int(coast_frames)
         self.gate_factor = float(gate_factor)
-        self.stats = TrackerStats()
-        self._tracks: dict[int, _Track] = {}
-        self._frame = 0
-        self._last_full = -(10**9)
-        self._previous: set[int] = set()
+        self.reset()
 
     # -- public --------------------------------------------------------------------------------
     def reset(self) -> None:
         """Forget every track (the next frame is searched whole)."""
-        self._tracks.clear()
+        self._tracks: dict[int, _Track] = {}
         self._frame = 0
         self._last_full = -(10**9)
-        self._previous = set()
+        self._previous: set[int] = set()
         self.stats = TrackerStats()
 
     @property
@@ -275,23 +304,25 @@ class MarkerTracker:
         Parameters
         ----------
         image : ndarray
-            The frame, grey (H, W) or colour (H, W, 3), ``uint8``.
+            The frame, grey (H, W) or colour (H, W, 3, BGR), ``uint8`` (or float 0-255).
         """
+        from labauto.vision.marker_candidates import grey_image
+
         started = time.perf_counter()
-        image = np.asarray(image)
-        if image.ndim not in (2, 3) or image.shape[0] == 0 or image.shape[1] == 0:
-            raise ValueError(f"expected an (H, W) or (H, W, C) image, got shape {image.shape}")
+        grey = grey_image(image) if self._candidates else np.asarray(image)
+        if grey.ndim not in (2, 3) or grey.shape[0] == 0 or grey.shape[1] == 0:
+            raise ValueError(f"expected an (H, W) or (H, W, C) image, got shape {grey.shape}")
         index = self._frame
         due = not self._tracks or index - self._last_full >= self.full_interval
         mode = "full"
         if due:
-            found = self._search_full(image)
+            found = self._search(grey, full=True)
         else:
-            found = self._search_windows(image)
+            found = self._search(grey, full=False)
             expected = [t.id for t in self._tracks.values() if t.missed == 0]
             if any(tid not in found for tid in expected):
                 self.stats.fallbacks += 1
-                found = self._search_full(image)
+                found = self._search(grey, full=True)
             else:
                 mode = "roi"
         self._apply(found, index)
@@ -309,72 +340,160 @@ class MarkerTracker:
         return FrameResult(index, elapsed, mode, markers, lost, appeared)
 
     # -- search --------------------------------------------------------------------------------
-    def _search_full(self, image: np.ndarray) -> dict[int, _Found]:
-        self._last_full = self._frame
-        self.stats.full_searches += 1
-        detections = [self._measure(m, 0.0, 0.0) for m in self.detect(image)]
-        return self._associate(detections, windows=None)
-
-    def _search_windows(self, image: np.ndarray) -> dict[int, _Found]:
-        height, width = image.shape[:2]
-        ids, rects = [], []
+    def _search(self, frame: np.ndarray, *, full: bool) -> dict[int, _Obs]:
+        """Search the whole frame or the windows of the tracks; the markers found by id."""
+        if full:
+            self._last_full = self._frame
+            self.stats.full_searches += 1
+            return self._associate(self._observe(frame), frame, windows=None)
+        height, width = frame.shape[:2]
+        windows: dict[int, Rect] = {}
         for track in self._tracks.values():
             rect = clip_rect(self._window(track), width, height)
             if rect is not None:
-                ids.append(track.id)
-                rects.append(rect)
-        if not rects:
+                windows[track.id] = rect
+        if not windows:
             return {}
-        merged = merge_overlapping(rects)
-        mosaic = build_mosaic(image, merged)
+        mosaic = build_mosaic(frame, merge_overlapping(list(windows.values())))
         self.stats.window_pixels.append(int(mosaic.image.shape[0] * mosaic.image.shape[1]))
-        detections = []
-        for marker in self.detect(mosaic.image):
-            point = self._center_of(marker)
-            tile = mosaic.owner_of(point)
-            if tile is None:
-                continue  # in the padding: a piece of an object cut by its window
-            dx, dy = mosaic.offsets[tile]
-            detections.append(self._measure(marker, float(dx), float(dy)))
-        windows = {tid: rects[i] for i, tid in enumerate(ids)}
-        return self._associate(detections, windows=windows)
+        observed = []
+        for obs in self._observe(mosaic.image):
+            tile = mosaic.owner_of((float(obs.position[0]), float(obs.position[1])))
+            if tile is not None:  # else in the padding: a piece of an object cut by its window
+                offset = mosaic.offsets[tile].astype(np.float64)
+                observed.append(_Obs(obs.id, obs.position - offset, obs.radius))
+        return self._associate(observed, frame, windows=windows)
+
+    def _observe(self, image: np.ndarray) -> list[_Obs]:
+        """Centre candidates (default) or coded markers (``fit`` or an own detector)."""
+        if self._candidates:
+            from labauto.vision.marker_candidates import centre_candidates
+
+            found = centre_candidates(image, self.params)
+            return [
+                _Obs(None, found.centroids[i].copy(), float(found.radii[i]))
+                for i in range(len(found))
+            ]
+        return [self._coded(marker) for marker in self.detect(image)]
+
+    def _coded(self, marker: MarkerLike) -> _Obs:
+        point = marker.center if self.fit else marker.centroid
+        axes = getattr(marker.ellipse, "axes", None)
+        if axes is None and isinstance(marker.ellipse, dict):
+            axes = marker.ellipse.get("axes")
+        radius = float(axes[0]) if axes is not None else 5.0
+        return _Obs(int(marker.id), np.array([float(point[0]), float(point[1])]), radius)
 
     def _associate(
-        self,
-        detections: list[tuple[int, np.ndarray, float]],
-        windows: dict[int, Rect] | None,
-    ) -> dict[int, _Found]:
-        """Assign detections to ids with the id-swap guard of the module docstring."""
-        by_id: dict[int, list[tuple[np.ndarray, float]]] = {}
-        for mid, position, extent in detections:
-            by_id.setdefault(mid, []).append((position, extent))
-        found: dict[int, _Found] = {}
-        for mid, places in by_id.items():
-            track = self._tracks.get(mid)
-            if windows is not None:
-                if mid not in windows:
-                    continue  # another id in a window: left to the next full-frame search
-                x0, y0, x1, y1 = windows[mid]
-                places = [p for p in places if _inside(p[0], (x0, y0, x1, y1))]
-                if not places:
-                    continue
-            if track is not None and track.missed <= self.coast_frames:
-                predicted = self._prediction(track)
-                distances = [float(np.linalg.norm(p[0] - predicted)) for p in places]
-                best = int(np.argmin(distances))
-                position, extent = places[best]
-                far = distances[best] > self.gate_factor * self._half_size(track)
-                if track.missed == 0 and far and self._near_other_track(mid, position):
-                    self.stats.rejected_jumps += 1
-                    continue
-            else:
-                position, extent = places[0]
-                spread = max(float(np.linalg.norm(p[0] - position)) for p in places)
-                if spread > max(extent, 1.0):
-                    self.stats.ambiguous += 1
-                    continue
-            found[mid] = _Found(position, extent)
+        self, observed: list[_Obs], frame: np.ndarray, windows: dict[int, Rect] | None
+    ) -> dict[int, _Obs]:
+        """Markers found by id: candidates by position, then codes (module docstring)."""
+        found: dict[int, _Obs] = {}
+        coded = [o for o in observed if o.id is not None]
+        candidates = [o for o in observed if o.id is None]
+        if candidates:
+            to_read = self._by_position(candidates, found, full=windows is None)
+            if to_read:
+                coded += self._read_codes(frame, to_read)
+        for mid, places in _group_by_id(coded).items():
+            hit = self._take_coded(mid, places, windows)
+            if hit is not None:
+                found[mid] = hit
         return found
+
+    def _by_position(
+        self, candidates: list[_Obs], found: dict[int, _Obs], full: bool
+    ) -> list[_Obs]:
+        """Give tracks seen in the previous frame their one clear candidate (into ``found``).
+
+        Returns the candidates whose code must be read.
+        """
+        positions = np.array([c.position for c in candidates])
+        radii = np.array([c.radius for c in candidates])
+        claims: dict[int, list[int]] = {}
+        choice: dict[int, int | None] = {}
+        coasting: set[int] = set()
+        for track in self._tracks.values():
+            if track.missed > self.coast_frames:
+                continue
+            predicted = self._prediction(track)
+            reach = self._half_size(track) - track.radius * self.extent_factor + 1.0
+            offset = np.abs(positions - predicted).max(axis=1)
+            ratio = radii / max(track.radius, 1e-6)
+            eligible = np.flatnonzero((offset <= reach) & (ratio >= 0.6) & (ratio <= 1.6))
+            for k in eligible.tolist():
+                claims.setdefault(k, []).append(track.id)
+            if track.missed:
+                coasting.update(eligible.tolist())
+                continue
+            distance = np.hypot(*(positions[eligible] - predicted).T) if len(eligible) else []
+            order = np.argsort(distance)
+            if len(eligible) == 1 or (
+                len(eligible) > 1 and distance[order[1]] > 2.0 * distance[order[0]] + 2.0
+            ):
+                choice[track.id] = int(eligible[order[0]])
+            elif len(eligible) > 1:
+                choice[track.id] = None
+        to_read: set[int] = set()
+        for tid, k in choice.items():
+            if k is not None and claims[k] == [tid]:
+                found[tid] = candidates[k]
+            else:
+                self.stats.ambiguous += 1
+                track = self._tracks[tid]
+                near = np.abs(positions - self._prediction(track)).max(axis=1)
+                to_read.update(np.flatnonzero(near <= self._half_size(track)).tolist())
+        taken = [o.position for o in found.values()]
+        to_read.update(k for k in coasting if not _near_any(positions[k], taken, found))
+        if full:
+            for k in range(len(candidates)):
+                if k not in claims and not _near_any(positions[k], taken, found):
+                    to_read.add(k)
+        return [candidates[k] for k in sorted(to_read)]
+
+    def _read_codes(self, frame: np.ndarray, candidates: list[_Obs]) -> list[_Obs]:
+        """Read the codes at ``candidates`` with the whole detector (in frame pixels)."""
+        from labauto.vision.marker_candidates import read_markers_at
+        from labauto.vision.marker_codes import QUIET_RADIUS
+
+        self.stats.code_reads += len(candidates)
+        window_area = sum((2.6 * QUIET_RADIUS * c.radius + 8) ** 2 for c in candidates)
+        if window_area > 0.5 * frame.shape[0] * frame.shape[1]:  # e.g. the first frame
+            return [self._coded(m) for m in self.detect(frame)]
+        markers = read_markers_at(
+            frame,
+            np.array([c.position for c in candidates]),
+            np.array([c.radius for c in candidates]),
+            self.params,
+        )
+        return [self._coded(m) for m in markers]
+
+    def _take_coded(
+        self, mid: int, places: list[_Obs], windows: dict[int, Rect] | None
+    ) -> _Obs | None:
+        """The detection that continues (or starts) the track of ``mid``, with the guard."""
+        track = self._tracks.get(mid)
+        if windows is not None:
+            if mid not in windows:
+                return None  # another id in a window: left to the next full-frame search
+            places = [p for p in places if _inside(p.position, windows[mid])]
+            if not places:
+                return None
+        if track is not None and track.missed <= self.coast_frames:
+            predicted = self._prediction(track)
+            distances = [float(np.linalg.norm(p.position - predicted)) for p in places]
+            hit = places[int(np.argmin(distances))]
+            far = min(distances) > self.gate_factor * self._half_size(track)
+            if track.missed == 0 and far and self._near_other_track(mid, hit.position):
+                self.stats.rejected_jumps += 1
+                return None
+            return hit
+        hit = places[0]
+        spread = max(float(np.linalg.norm(p.position - hit.position)) for p in places)
+        if spread > max(hit.radius * self.extent_factor, 1.0):
+            self.stats.ambiguous += 1
+            return None
+        return hit
 
     def _near_other_track(self, mid: int, position: np.ndarray) -> bool:
         """True when ``position`` is inside the window of another id's track."""
@@ -386,19 +505,17 @@ class MarkerTracker:
         return False
 
     # -- tracks --------------------------------------------------------------------------------
-    def _apply(self, found: dict[int, _Found], index: int) -> None:
+    def _apply(self, found: dict[int, _Obs], index: int) -> None:
         for mid, hit in found.items():
             track = self._tracks.get(mid)
             if track is None or track.missed > self.coast_frames:
-                self._tracks[mid] = _Track(
-                    mid, hit.position, np.zeros(2), hit.extent, index, known_velocity=False
-                )
+                self._tracks[mid] = _Track(mid, hit.position, np.zeros(2), hit.radius, index)
                 continue
             dt = index - track.last_frame
             track.velocity = (hit.position - track.position) / max(dt, 1)
             track.known_velocity = True
             track.position = hit.position
-            track.extent = hit.extent
+            track.radius = hit.radius
             track.last_frame = index
             track.missed = 0
         for mid in list(self._tracks):
@@ -419,7 +536,8 @@ class MarkerTracker:
             allowance = self.speed_gain * float(np.hypot(*track.velocity)) * dt
         else:  # no velocity yet: it may have moved initial_speed_px per frame, any way
             allowance = self.initial_speed_px * dt
-        return track.extent + self.margin_px + allowance + self.grow_px * track.missed
+        extent = track.radius * self.extent_factor
+        return extent + self.margin_px + allowance + self.grow_px * track.missed
 
     def _window(self, track: _Track) -> Rect:
         cx, cy = self._prediction(track)
@@ -431,31 +549,25 @@ class MarkerTracker:
             math.ceil(cy + half) + 1,
         )
 
-    # -- markers -------------------------------------------------------------------------------
-    def _center_of(self, marker: MarkerLike) -> tuple[float, float]:
-        point = marker.center if self.fit else marker.centroid
-        return (float(point[0]), float(point[1]))
 
-    def _measure(self, marker: MarkerLike, dx: float, dy: float) -> tuple[int, np.ndarray, float]:
-        x, y = self._center_of(marker)
-        axes = getattr(marker.ellipse, "axes", None)
-        if axes is None and isinstance(marker.ellipse, dict):
-            axes = marker.ellipse.get("axes")
-        semi_major = float(axes[0]) if axes is not None else 5.0
-        return int(marker.id), np.array([x - dx, y - dy]), semi_major * self.extent_factor
+def _group_by_id(observed: list[_Obs]) -> dict[int, list[_Obs]]:
+    groups: dict[int, list[_Obs]] = {}
+    for obs in observed:
+        groups.setdefault(int(obs.id), []).append(obs)  # type: ignore[arg-type]
+    return groups
+
+
+def _near_any(point: np.ndarray, taken: list[np.ndarray], found: dict[int, _Obs]) -> bool:
+    """True when ``point`` lies within the code ring of a marker already found (its sectors)."""
+    from labauto.vision.marker_codes import QUIET_RADIUS
+
+    return any(
+        float(np.hypot(*(point - obs.position))) <= QUIET_RADIUS * obs.radius
+        for obs in found.values()
+    )
 
 
 def _inside(point: np.ndarray, rect: Rect) -> bool:
     """True when ``point`` lies in the pixels of ``rect`` (half-open, pixel-centre origin)."""
     x0, y0, x1, y1 = rect
     return bool(x0 - 0.5 <= point[0] <= x1 - 0.5 and y0 - 0.5 <= point[1] <= y1 - 0.5)
-
-
-def _default_detector(options: dict[str, Any]) -> Callable[[np.ndarray], Sequence[MarkerLike]]:
-    """:func:`labauto.vision.markers.detect_markers` with ``options`` (issue 14's detector)."""
-    from labauto.vision.markers import detect_markers
-
-    def detect(image: np.ndarray) -> Sequence[MarkerLike]:
-        return detect_markers(image, **options)
-
-    return detect

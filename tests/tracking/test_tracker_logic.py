@@ -124,7 +124,7 @@ def test_one_new_id_at_two_places_is_not_reported():
             type(b)(b.id, (b.centroid[0] + 200, b.centroid[1]), b.center, b.ellipse) for b in found
         ]
 
-    tracker = MarkerTracker(doubled)
+    tracker = MarkerTracker(doubled, extent_factor=1.5)
     result = tracker.update(render({4: (100.0, 100.0)}))
     assert result.markers == [] and tracker.stats.ambiguous == 1
 
