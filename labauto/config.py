@@ -84,6 +84,9 @@ class GantryFault(Section):
     seconds: NonNegative = 0.5
     code: Annotated[int, Field(ge=1)] = 1
     fraction: Annotated[float, Field(gt=0, lt=1)] = 0.5
+    #: ``lost_steps``: the axis and the travel (mm) each affected move loses.
+    axis: Literal["x", "y", "z"] = "x"
+    mm: Positive = 1.0
 
     @model_validator(mode="before")
     @classmethod
