@@ -50,9 +50,10 @@ from labauto.vision.concentric import projected_center
 from labauto.vision.contours import Contours
 from labauto.vision.detector import DetectorParams, extract_contours, validate_params
 from labauto.vision.ellipse import Ellipse
-from labauto.vision.ellipse_fit import fit_ellipses_geometric_batch, fit_selected_ellipses
+from labauto.vision.ellipse_fit import fit_selected_ellipses
 from labauto.vision.gradient import as_uint8_image
-from labauto.vision.marker_codes import N_BITS, QUIET_RADIUS, RING_INNER, RING_OUTER, decode_words
+from labauto.vision.marker_codes import N_BITS, RING_OUTER, decode_words
+from labauto.vision.marker_edges import affine_frames, refine_circles
 from labauto.vision.shape_angle import shape_angles
 
 #: Samples per sector along the ring, and the ring radii sampled (centre radii).
@@ -61,11 +62,6 @@ READ_RADII = (2.3, 2.5, 2.7)
 #: Radii (centre radii) sampled for the ink level and the paper level.
 INK_RADII = (0.0, 0.35, 0.6)
 PAPER_RADII = (1.5, 3.35)
-#: Ring-edge point selection and fit acceptance for the bias correction.
-EDGE_BAND = 0.25
-EDGE_MAX_ANGLE_DEG = 15.0
-MIN_EDGE_POINTS = 24
-MAX_EDGE_RMS = 0.35
 
 
 @dataclass(frozen=True)
@@ -238,25 +234,15 @@ def find_markers(image: np.ndarray, params: MarkerParams = MarkerParams()) -> Ma
 # ------------------------------------------------------------------------------ the steps
 
 
-def _frames(ellipses: list[Ellipse]) -> tuple[np.ndarray, np.ndarray]:
-    """Centres (K, 2) and affine maps (K, 2, 2) taking the unit circle onto each ellipse."""
-    centres = np.array([e.center for e in ellipses], np.float64)
-    theta = np.deg2rad([e.angle for e in ellipses])
-    axes = np.array([e.axes for e in ellipses], np.float64)
-    c, s = np.cos(theta), np.sin(theta)
-    maps = np.empty((len(ellipses), 2, 2))
-    maps[:, 0, 0], maps[:, 0, 1] = c * axes[:, 0], -s * axes[:, 1]
-    maps[:, 1, 0], maps[:, 1, 1] = s * axes[:, 0], c * axes[:, 1]
-    return centres, maps
-
-
 def _sample(
     grey: np.ndarray, centres: np.ndarray, maps: np.ndarray, unit: np.ndarray
 ) -> np.ndarray:
     """Bilinear grey values at ``centre + map @ unit`` for every frame: (K, M)."""
-    pts = centres[:, None, :] + np.einsum("kij,mj->kmi", maps, unit)
-    mx = np.ascontiguousarray(pts[..., 0], np.float32)
-    my = np.ascontiguousarray(pts[..., 1], np.float32)
+    m = maps.astype(np.float32)
+    u, v = unit[:, 0].astype(np.float32), unit[:, 1].astype(np.float32)
+    c = centres.astype(np.float32)
+    mx = c[:, :1] + m[:, 0, :1] * u + m[:, 0, 1:] * v
+    my = c[:, 1:] + m[:, 1, :1] * u + m[:, 1, 1:] * v
     out = cv2.remap(grey, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     return out.astype(np.float64)
 
@@ -268,15 +254,15 @@ def _circle(radii: tuple[float, ...], n: int) -> np.ndarray:
 
 def _read_codes(
     grey: np.ndarray, ellipses: list[Ellipse], params: MarkerParams
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Ids (-1: no code), scores, bit-0 directions (rad) and frames' ok flags of the ellipses."""
-    centres, maps = _frames(ellipses)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ids (-1: no code), scores, code bit-0 directions (rad), bits as read and where read bit 0
+    starts (rad), all in the rectified frames of the ellipses."""
+    centres, maps = affine_frames(ellipses)
     n_ring = N_BITS * SAMPLES_PER_BIT
-    grey32 = grey.astype(np.float32)
-    ring = _sample(grey32, centres, maps, _circle(READ_RADII, n_ring))
+    ring = _sample(grey, centres, maps, _circle(READ_RADII, n_ring))
     ring = ring.reshape(len(ellipses), len(READ_RADII), n_ring).mean(axis=1)
-    ink = np.median(_sample(grey32, centres, maps, _circle(INK_RADII, 8)), axis=1)
-    paper = np.median(_sample(grey32, centres, maps, _circle(PAPER_RADII, 24)), axis=1)
+    ink = np.median(_sample(grey, centres, maps, _circle(INK_RADII, 8)), axis=1)
+    paper = np.median(_sample(grey, centres, maps, _circle(PAPER_RADII, 24)), axis=1)
     contrast = paper - ink
     safe = np.where(np.abs(contrast) < 1e-9, 1e-9, contrast)
     level = (ring - ink[:, None]) / safe[:, None]  # 0 ink .. 1 paper
@@ -300,7 +286,8 @@ def _read_codes(
     score = best_margin * np.minimum(np.abs(contrast) * 2.0 / 255.0, 1.0)
     # read bit i starts at angle (i*S + p) * 2 pi / n_ring; the code's bit 0 is read bit -turns
     bit0 = ((-turns) % N_BITS * s + best_phase) * 2.0 * np.pi / n_ring
-    return ids, score, bit0, ok
+    start = best_phase * 2.0 * np.pi / n_ring  # where read bit 0 starts
+    return ids, score, bit0, best_bits, start
 
 
 def _candidates(grey: np.ndarray, contours: Contours, params: MarkerParams):
@@ -331,21 +318,32 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
     if not keep:
         return []
     ellipses = [fits[k] for k in keep]
-    ids, score, bit0, _ = _read_codes(grey, ellipses, params)
+    pixels = grey.astype(np.float32)  # sampled at sub-pixel positions from here on
+    ids, score, bit0, bits, start = _read_codes(pixels, ellipses, params)
     best: dict[int, int] = {}
     for j, marker_id in enumerate(ids.tolist()):
         if marker_id >= 0 and (marker_id not in best or score[j] > score[best[marker_id]]):
             best[marker_id] = j
     chosen = sorted(best.items())
-    rings = (
-        _ring_fits(contours, angles.centroid, [ellipses[j] for _, j in chosen])
+    picked = [j for _, j in chosen]
+    circles = (
+        refine_circles(
+            pixels,
+            [ellipses[j] for j in picked],
+            [bits[j] for j in picked],
+            [float(start[j]) for j in picked],
+            params.min_contrast,
+        )
         if params.correct_bias
-        else [() for _ in chosen]
+        else [(None, None, None)] * len(picked)
     )
     out = []
-    for (marker_id, j), ring in zip(chosen, rings, strict=True):
-        e = ellipses[j]
-        centre = projected_center([e, *ring]) if ring else None
+    for (marker_id, j), (centre_fit, inner, outer) in zip(chosen, circles, strict=True):
+        e = centre_fit if centre_fit is not None else ellipses[j]
+        # the centre circle with the outer ring edge is the best-conditioned pair (radius ratio
+        # 3); the inner edge stands in when the outer one could not be fitted
+        ring = (outer,) if outer is not None else (inner,) if inner is not None else ()
+        centre = projected_center([e, *ring]) if centre_fit is not None and ring else None
         cx, cy = angles.centroid[keep[j]]
         out.append(
             Marker(
@@ -356,66 +354,7 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
                 score=float(score[j]),
                 rotation_deg=float(np.degrees(bit0[j])),
                 bias_corrected=centre is not None,
-                ring_ellipses=tuple(ring) if centre is not None else (),
+                ring_ellipses=ring if centre is not None else (),
             )
         )
     return out
-
-
-def _ring_fits(
-    contours: Contours, centroids: np.ndarray, ellipses: list[Ellipse]
-) -> list[tuple[Ellipse, ...]]:
-    """Ellipses of the code ring's inner and outer edges of every marker (bias correction)."""
-    if not ellipses:
-        return []
-    centres, maps = _frames(ellipses)
-    inverse = np.linalg.inv(maps)
-    lengths = contours.lengths
-    sets: list[np.ndarray] = []
-    owners: list[tuple[int, int]] = []
-    for m in range(len(ellipses)):
-        rel = np.einsum("ij,kj->ki", inverse[m], centroids - centres[m])
-        rho = np.hypot(rel[:, 0], rel[:, 1])
-        near = np.flatnonzero((rho > 1.3) & (rho < QUIET_RADIUS))
-        if near.size == 0:
-            continue
-        idx = np.concatenate(
-            [np.arange(contours.offsets[k], contours.offsets[k] + lengths[k]) for k in near]
-        )
-        pts = contours.points[idx]
-        grads = contours.gradients[idx].astype(np.float64)
-        u = (pts - centres[m]) @ inverse[m].T
-        r = np.hypot(u[:, 0], u[:, 1])
-        # the ellipse's normal at the point: inverse^T u (the gradient of |inverse (p - c)|^2)
-        normal = u @ inverse[m]
-        cosang = np.abs(np.sum(normal * grads, axis=1)) / (
-            np.hypot(normal[:, 0], normal[:, 1]) * np.hypot(grads[:, 0], grads[:, 1]) + 1e-12
-        )
-        radial = cosang >= np.cos(np.deg2rad(EDGE_MAX_ANGLE_DEG))
-        for which, radius in enumerate((RING_INNER, RING_OUTER)):
-            sel = radial & (np.abs(r - radius) < EDGE_BAND)
-            if np.count_nonzero(sel) >= MIN_EDGE_POINTS:
-                sets.append(pts[sel])
-                owners.append((m, which))
-    out: list[list[Ellipse]] = [[] for _ in ellipses]
-    if not sets:
-        return [()] * len(ellipses)
-    offsets = np.concatenate(([0], np.cumsum([len(s) for s in sets]))).astype(np.int64)
-    initial = np.array(
-        [
-            (
-                *ellipses[m].center,
-                ellipses[m].axes[0] * (RING_INNER, RING_OUTER)[w],
-                ellipses[m].axes[1] * (RING_INNER, RING_OUTER)[w],
-                ellipses[m].angle,
-            )
-            for m, w in owners
-        ]
-    )
-    fits = fit_ellipses_geometric_batch(
-        np.concatenate(sets), offsets, initial, max_iter=20, tol=1e-7
-    )
-    for (m, _), fit in zip(owners, fits, strict=True):
-        if fit is not None and fit.rms <= MAX_EDGE_RMS:
-            out[m].append(fit.ellipse)
-    return [tuple(e) for e in out]
