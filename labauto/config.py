@@ -318,6 +318,29 @@ class OutputConfig(Section):
     annotate: bool = True
 
 
+class HeadCheckConfig(Section):
+    """The camera watching the picking head (:mod:`labauto.orchestrator.head_check`)."""
+
+    enabled: bool = False
+    #: Id of the coded marker on the head.
+    marker_id: Annotated[int, Field(ge=0)] = 0
+    #: Largest distance (mm) between the seen and the commanded head position.
+    tolerance_mm: Positive = 0.5
+    #: ``simulated``: rendered where the simulated gantry really is (needs ``robot.simulate``);
+    #: ``camera``: the camera driver's ``capture()``.
+    camera: Literal["simulated", "camera"] = "simulated"
+    #: Centre-circle radius of the head's marker (mm), for the simulated camera.
+    marker_radius_mm: Positive = 1.0
+
+    @model_validator(mode="after")
+    def _known_marker(self) -> HeadCheckConfig:
+        from labauto.vision.marker_codes import n_codes
+
+        if self.marker_id >= n_codes():
+            raise ValueError(f"marker_id: {self.marker_id} is no marker id (0-{n_codes() - 1})")
+        return self
+
+
 class Config(Section):
     """A whole workcell configuration."""
 
@@ -334,6 +357,7 @@ class Config(Section):
     picking: PickingConfig = PickingConfig()
     output: OutputConfig = OutputConfig()
     run: RunSection = RunSection()
+    head_check: HeadCheckConfig = HeadCheckConfig()
 
 
 _EXPECTED = {
