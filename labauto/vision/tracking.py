@@ -15,18 +15,19 @@ Prediction model
     centres are precise to a few hundredths of a pixel, so the last displacement is the best
     estimate of the next one, and it follows a turn within one frame.
 Window size
-    A square of half-size ``extent + margin_px + speed_gain * |v| * dt + grow_px * missed``
-    around the prediction. ``extent`` is what must be seen of the marker, its centre circle's
-    radius times ``extent_factor``: 1.6 by default (the centre circle and its edge, all the DES
-    centroid needs), 3.6 when the whole marker is read in the window (``fit=True`` or a detector
-    of one's own: code ring and quiet zone). So the window holds that much of the marker
-    wherever it is within the allowance. The allowance is the prediction error the window
-    tolerates: ``margin_px`` for an acceleration from standstill and for jitter, and a share of
-    the speed (``speed_gain``; 0.5: the velocity may change by half between two frames) since
-    faster motion changes more. A marker just found has no velocity yet; its allowance is
-    ``initial_speed_px`` per frame in full (it may move that fast in any direction). Windows
-    are clipped to the frame; windows that overlap are merged into one; all of them are packed
-    into one mosaic and the detector runs once (:mod:`labauto.vision.roi_mosaic`).
+    A square of half-size ``extent + margin_px + min(speed_gain * |v| * dt + grow_px * missed,
+    max_allowance_px)`` around the prediction. ``extent`` is what must be seen of the marker,
+    its centre circle's radius times ``extent_factor``: 1.6 by default (the centre circle and
+    its edge, all the DES centroid needs), 3.6 when the whole marker is read in the window
+    (``fit=True`` or a detector of one's own: code ring and quiet zone). So the window holds
+    that much of the marker wherever it is within the allowance. The allowance is the prediction
+    error the window tolerates: ``margin_px`` for an acceleration from standstill and for
+    jitter, and a share of the speed (``speed_gain``; 0.5: the velocity may change by half
+    between two frames) since faster motion changes more. A marker just found has no velocity
+    yet; its allowance is ``initial_speed_px`` per frame in full (it may move that fast in any
+    direction). Windows are clipped to the frame; windows that overlap are merged into one; all
+    of them are packed into one mosaic and the detector runs once
+    (:mod:`labauto.vision.roi_mosaic`).
 Full-frame search
     On the first frame, every ``full_interval`` frames (so markers entering the view are picked
     up within ``full_interval`` frames: a marker that re-enters is reported in the next
@@ -34,22 +35,27 @@ Full-frame search
     not found in its window (it may have moved past its window, e.g. a jerk, or left the view):
     then the windowed results are discarded and the frame is searched whole (``mode`` is
     ``"full"``). A marker missing from the full-frame search too is *lost*; its track coasts
-    for ``coast_frames`` frames (searched in a window growing by ``grow_px`` per missed frame,
-    which re-finds a marker after a short occlusion without waiting for the next full-frame
-    search), then it is forgotten until a full-frame search finds it again.
+    for ``coast_frames`` frames (15: searched in a window growing by ``grow_px`` per missed
+    frame, which re-finds a marker coming out from behind an occluder without waiting for the
+    next full-frame search; a window outside the frame costs nothing), then it is forgotten
+    until a full-frame search finds it again.
 Searching
     By default (DES centroids) a search finds the *centre candidates* of the searched pixels,
     the DES of a centre circle's size, with contours and the shape angle only
     (:func:`labauto.vision.marker_candidates.centre_candidates`, no fits, no code reads). A
     candidate continues the track of a marker seen in the previous frame when it is the one
-    candidate near that marker's prediction (within the allowance, area-equivalent radius
-    within 0.6-1.6 of the marker's, the next candidate more than twice as far plus 2 px) and
-    near no other marker's prediction. Codes are read, by the whole detector in small windows
+    candidate near that marker's prediction (within the allowance and within 1.2 centre radii +
+    2 px, nearer than the code ring's sectors, which can pass for a centre circle; further off,
+    the code decides; area-equivalent radius within 0.9-1.11 of the marker's reference radius,
+    so a centre circle cut by an occluder or the frame edge is not taken; the reference follows
+    a candidate only when it is within 3 %, so a circle being covered bit by bit cannot drag it
+    down; a code read resets it), the next candidate more than twice as far plus 2 px) and near
+    no other marker's prediction. Codes are read, by the whole detector in small windows
     (:func:`~labauto.vision.marker_candidates.read_markers_at`), only where that does not
-    decide: a candidate two markers compete for or a marker with two candidates, a candidate
-    in the window of a lost (coasting) marker, and in a full-frame search every candidate no
-    marker took (new markers). With ``fit=True`` (fitted, bias-corrected centres) or a detector
-    of one's own, every search runs the whole detector on the searched pixels instead.
+    decide: a candidate two markers compete for or a marker with two candidates, a candidate in
+    the window of a lost (coasting) marker, and in a full-frame search every candidate no marker
+    took (new markers). With ``fit=True`` (fitted, bias-corrected centres) or a detector of
+    one's own, every search runs the whole detector on the searched pixels instead.
 Id-swap guard
     A marker's identity is its decoded code: a coded detection can only continue the track of
     its own id, never another's, and a track is taken up by position only from one frame to the
@@ -61,9 +67,10 @@ Id-swap guard
     places are within the marker's own radius (the same marker found twice); (3) a detection of
     a tracked id (seen in the previous frame) further than ``gate_factor`` window half-sizes
     from its prediction and inside another marker's window is taken for that marker's code
-    misread, not for a jump, and rejected (far from every other marker it is taken for a jump).
-    So a misread code can at worst lose a marker for a frame; it cannot move another marker's
-    id.
+    misread, not for a jump, and rejected (far from every other marker it is taken for a jump);
+    (4) a new id found inside the window of a tracked marker of another id is taken for that
+    marker misread, and rejected. So a misread code can at worst lose a marker for a frame; it
+    cannot move another marker's id.
 
 A detector of one's own is any function ``detect(image) -> markers`` whose markers have
 ``id``, ``centroid`` (the DES centroid, the paper's choice and the default centre), ``center``
@@ -75,7 +82,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -206,7 +213,7 @@ class MarkerTracker:
     extent_factor : float, optional
         What of a marker a window must hold, in centre radii (default 1.6, or 3.6 when the
         whole marker is detected in the window).
-    margin_px, speed_gain, initial_speed_px, grow_px : float
+    margin_px, speed_gain, initial_speed_px, grow_px, max_allowance_px : float
         The window allowance (module docstring).
     coast_frames : int
         Frames a lost marker is still searched in a window around its prediction.
@@ -234,8 +241,9 @@ class MarkerTracker:
         margin_px: float = 6.0,
         speed_gain: float = 0.5,
         initial_speed_px: float = 12.0,
-        grow_px: float = 8.0,
-        coast_frames: int = 3,
+        grow_px: float = 4.0,
+        max_allowance_px: float = 120.0,
+        coast_frames: int = 15,
         gate_factor: float = 4.0,
         **detect_options: Any,
     ) -> None:
@@ -255,6 +263,7 @@ class MarkerTracker:
             ("speed_gain", speed_gain),
             ("initial_speed_px", initial_speed_px),
             ("grow_px", grow_px),
+            ("max_allowance_px", max_allowance_px),
             ("gate_factor", gate_factor),
         ):
             if not (math.isfinite(value) and value >= 0):
@@ -276,6 +285,7 @@ class MarkerTracker:
         self.speed_gain = float(speed_gain)
         self.initial_speed_px = float(initial_speed_px)
         self.grow_px = float(grow_px)
+        self.max_allowance_px = float(max_allowance_px)
         self.coast_frames = int(coast_frames)
         self.gate_factor = float(gate_factor)
         self.reset()
@@ -374,14 +384,25 @@ class MarkerTracker:
                 _Obs(None, found.centroids[i].copy(), float(found.radii[i]))
                 for i in range(len(found))
             ]
-        return [self._coded(marker) for marker in self.detect(image)]
+        return _present(self._coded(marker) for marker in self.detect(image))
 
-    def _coded(self, marker: MarkerLike) -> _Obs:
+    def _coded(self, marker: MarkerLike) -> _Obs | None:
+        """The observation of a coded marker; ``None`` for a centre circle cut off in part.
+
+        The centroid of a whole (projected) circle's contour is the centre of its ellipse; an
+        occluder or the frame edge cutting the circle moves the two apart.
+        """
         point = marker.center if self.fit else marker.centroid
-        axes = getattr(marker.ellipse, "axes", None)
-        if axes is None and isinstance(marker.ellipse, dict):
-            axes = marker.ellipse.get("axes")
+        ellipse = marker.ellipse
+        axes = getattr(ellipse, "axes", None)
+        if axes is None and isinstance(ellipse, dict):
+            axes = ellipse.get("axes")
         radius = float(axes[0]) if axes is not None else 5.0
+        centre = getattr(ellipse, "center", None)
+        if centre is not None:
+            apart = math.hypot(centre[0] - marker.centroid[0], centre[1] - marker.centroid[1])
+            if apart > 0.3 + 0.02 * radius:
+                return None
         return _Obs(int(marker.id), np.array([float(point[0]), float(point[1])]), radius)
 
     def _associate(
@@ -418,9 +439,11 @@ class MarkerTracker:
                 continue
             predicted = self._prediction(track)
             reach = self._half_size(track) - track.radius * self.extent_factor + 1.0
+            if not track.missed:  # never as far as the code ring's sectors (2-3 radii out)
+                reach = min(reach, 1.2 * track.radius + 2.0)
             offset = np.abs(positions - predicted).max(axis=1)
             ratio = radii / max(track.radius, 1e-6)
-            eligible = np.flatnonzero((offset <= reach) & (ratio >= 0.6) & (ratio <= 1.6))
+            eligible = np.flatnonzero((offset <= reach) & (ratio >= 0.9) & (ratio <= 1.11))
             for k in eligible.tolist():
                 claims.setdefault(k, []).append(track.id)
             if track.missed:
@@ -459,14 +482,14 @@ class MarkerTracker:
         self.stats.code_reads += len(candidates)
         window_area = sum((2.6 * QUIET_RADIUS * c.radius + 8) ** 2 for c in candidates)
         if window_area > 0.5 * frame.shape[0] * frame.shape[1]:  # e.g. the first frame
-            return [self._coded(m) for m in self.detect(frame)]
+            return _present(self._coded(m) for m in self.detect(frame))
         markers = read_markers_at(
             frame,
             np.array([c.position for c in candidates]),
             np.array([c.radius for c in candidates]),
             self.params,
         )
-        return [self._coded(m) for m in markers]
+        return _present(self._coded(m) for m in markers)
 
     def _take_coded(
         self, mid: int, places: list[_Obs], windows: dict[int, Rect] | None
@@ -493,6 +516,9 @@ class MarkerTracker:
         if spread > max(hit.radius * self.extent_factor, 1.0):
             self.stats.ambiguous += 1
             return None
+        if self._near_other_track(mid, hit.position):
+            self.stats.rejected_jumps += 1  # a new id where a tracked marker is: a misread
+            return None
         return hit
 
     def _near_other_track(self, mid: int, position: np.ndarray) -> bool:
@@ -515,7 +541,8 @@ class MarkerTracker:
             track.velocity = (hit.position - track.position) / max(dt, 1)
             track.known_velocity = True
             track.position = hit.position
-            track.radius = hit.radius
+            if hit.id is not None or abs(hit.radius / track.radius - 1.0) <= 0.03:
+                track.radius = hit.radius
             track.last_frame = index
             track.missed = 0
         for mid in list(self._tracks):
@@ -537,7 +564,8 @@ class MarkerTracker:
         else:  # no velocity yet: it may have moved initial_speed_px per frame, any way
             allowance = self.initial_speed_px * dt
         extent = track.radius * self.extent_factor
-        return extent + self.margin_px + allowance + self.grow_px * track.missed
+        allowance = min(allowance + self.grow_px * track.missed, self.max_allowance_px)
+        return extent + self.margin_px + allowance
 
     def _window(self, track: _Track) -> Rect:
         cx, cy = self._prediction(track)
@@ -548,6 +576,10 @@ class MarkerTracker:
             math.ceil(cx + half) + 1,
             math.ceil(cy + half) + 1,
         )
+
+
+def _present(observations: Iterable[_Obs | None]) -> list[_Obs]:
+    return [o for o in observations if o is not None]
 
 
 def _group_by_id(observed: list[_Obs]) -> dict[int, list[_Obs]]:

@@ -1,0 +1,166 @@
+"""Image sequences of a moving rigid marker set with exact truth (tracking tests, benchmarks).
+
+A board of coded markers (rows x cols at ``pitch_mm``, ids from ``first_id``) moves in front
+of a pinhole camera with OpenCV's distortion model: it swings sideways and up and down (far
+enough, with ``amplitude_mm``, to leave the view and come back), turns and tilts (perspective),
+and comes closer and goes away. Each frame is drawn with the exact-coverage marker renderer of
+:mod:`labauto.synthetic.markers` through the camera (``camera_map``), then optionally:
+
+* **motion blur**: the average of ``blur_steps`` renders spread over the exposure
+  (``exposure`` of the frame interval); the truth is the mean of the sub-frame centres;
+* **light changes**: a gain that drifts over time and across the image;
+* **an occluder**: a grey bar crossing the view;
+* **noise**: Gaussian, ``noise_sigma`` grey levels.
+
+The truth of a frame is the true image centre of every marker, and which are *visible*: the
+whole marker (code ring included, with a 2 px margin) inside the image and clear of the
+occluder. The pose of the board (``rvec``, ``tvec``, board to camera, mm) is given too.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from labauto.synthetic.markers import camera_map, draw_marker, finish
+from labauto.vision.marker_codes import QUIET_RADIUS, RING_OUTER
+
+__all__ = ["SequenceFrame", "SequenceSpec", "board_points", "render_sequence"]
+
+
+@dataclass(frozen=True)
+class SequenceSpec:
+    """What to render (see the module docstring)."""
+
+    rows: int = 5
+    cols: int = 7
+    pitch_mm: float = 45.0
+    radius_mm: float = 5.0
+    first_id: int = 0
+    width: int = 1280
+    height: int = 1024
+    focal_px: float = 1400.0
+    dist_coeffs: tuple[float, ...] = (-0.05, 0.01, 0.0, 0.0, 0.0)
+    distance_mm: float = 700.0
+    amplitude_mm: tuple[float, float] = (120.0, 60.0)
+    tilt_deg: float = 30.0
+    period_frames: float = 120.0
+    blur_steps: int = 1
+    exposure: float = 0.5
+    noise_sigma: float = 2.0
+    light: bool = True
+    occluder: bool = False
+    paper: float = 215.0
+    ink: float = 25.0
+
+    @property
+    def camera_matrix(self) -> np.ndarray:
+        """The camera's intrinsics."""
+        f = self.focal_px
+        return np.array([[f, 0, self.width / 2 - 0.5], [0, f, self.height / 2 - 0.5], [0, 0, 1.0]])
+
+
+@dataclass(frozen=True)
+class SequenceFrame:
+    """One rendered frame and its truth."""
+
+    index: int
+    image: np.ndarray
+    centers: dict[int, tuple[float, float]]
+    visible: frozenset[int]
+    rvec: np.ndarray
+    tvec: np.ndarray
+
+
+def board_points(spec: SequenceSpec) -> dict[int, tuple[float, float, float]]:
+    """``{id: (x, y, 0)}`` of the board's markers in mm, centred on the board's middle."""
+    out = {}
+    for r in range(spec.rows):
+        for c in range(spec.cols):
+            x = (c - (spec.cols - 1) / 2) * spec.pitch_mm
+            y = (r - (spec.rows - 1) / 2) * spec.pitch_mm
+            out[spec.first_id + r * spec.cols + c] = (x, y, 0.0)
+    return out
+
+
+def board_pose(spec: SequenceSpec, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """The board's pose at (fractional) frame ``t``: Rodrigues vector and translation (mm)."""
+    w = 2 * np.pi * t / spec.period_frames
+    tilt = np.deg2rad(spec.tilt_deg)
+    rvec = np.array([tilt * np.sin(0.7 * w + 0.3), tilt * np.sin(w), 0.4 * np.sin(0.5 * w)])
+    ax, ay = spec.amplitude_mm
+    tvec = np.array(
+        [ax * np.sin(w), ay * np.sin(1.3 * w + 0.5), spec.distance_mm + 80 * np.sin(0.6 * w)]
+    )
+    return rvec, tvec
+
+
+def _occluder(spec: SequenceSpec, t: float) -> tuple[int, int, int, int]:
+    """A vertical bar crossing the view from left to right once per period."""
+    phase = (t / spec.period_frames) % 1.0
+    x0 = int(-200 + phase * (spec.width + 400))
+    return (x0, 0, x0 + 90, spec.height)
+
+
+def render_sequence(
+    spec: SequenceSpec, n_frames: int, rng: np.random.Generator, start: int = 0
+) -> Iterator[SequenceFrame]:
+    """Render frames ``start .. start + n_frames - 1`` (see the module docstring)."""
+    points = board_points(spec)
+    k, d = spec.camera_matrix, np.asarray(spec.dist_coeffs, np.float64)
+    outline = np.column_stack(
+        (np.cos(np.linspace(0, 2 * np.pi, 24)), np.sin(np.linspace(0, 2 * np.pi, 24)))
+    )
+    xx = np.arange(spec.width)[None, :]
+    for index in range(start, start + n_frames):
+        steps = max(spec.blur_steps, 1)
+        offsets = np.linspace(-spec.exposure / 2, spec.exposure / 2, steps) if steps > 1 else [0.0]
+        accum = np.zeros((spec.height, spec.width))
+        sums: dict[int, np.ndarray] = {mid: np.zeros(2) for mid in points}
+        extents: dict[int, np.ndarray] = {}
+        for dt in offsets:
+            rvec, tvec = board_pose(spec, index + dt)
+            to_image = camera_map(k, d, rvec, tvec)
+            image = np.full((spec.height, spec.width), spec.paper)
+            for mid, (x, y, _z) in points.items():
+                ring = to_image(np.array([x, y]) + RING_OUTER * spec.radius_mm * outline)
+                quiet = to_image(np.array([x, y]) + QUIET_RADIUS * spec.radius_mm * outline)
+                extents[mid] = ring
+                center = to_image(np.array([[x, y]]))[0]
+                sums[mid] += center
+                lo, hi = quiet.min(axis=0), quiet.max(axis=0)
+                if hi[0] < 0 or hi[1] < 0 or lo[0] > spec.width - 1 or lo[1] > spec.height - 1:
+                    continue
+                draw_marker(image, mid, (x, y), spec.radius_mm, to_image=to_image, ink=spec.ink)
+            accum += image
+        image = accum / len(offsets)
+        centers = {
+            mid: (float(s[0] / len(offsets)), float(s[1] / len(offsets))) for mid, s in sums.items()
+        }
+        if spec.light:
+            phase = 2 * np.pi * index / spec.period_frames
+            gain = 0.85 + 0.15 * np.sin(phase) + 0.1 * np.cos(phase) * (xx / spec.width - 0.5)
+            image = image * gain
+        box = _occluder(spec, index) if spec.occluder else None
+        if box is not None:
+            image[:, max(box[0], 0) : max(min(box[2], spec.width), 0)] = 0.6 * spec.paper
+        visible = set()
+        for mid, ring in extents.items():
+            lo, hi = ring.min(axis=0), ring.max(axis=0)
+            inside = (
+                lo[0] >= 2 and lo[1] >= 2 and hi[0] <= spec.width - 3 and hi[1] <= spec.height - 3
+            )
+            clear = box is None or hi[0] < box[0] - 2 or lo[0] > box[2] + 2
+            if inside and clear:
+                visible.add(mid)
+        rvec, tvec = board_pose(spec, index)
+        yield SequenceFrame(
+            index,
+            finish(image, noise_sigma=spec.noise_sigma, rng=rng),
+            centers,
+            frozenset(visible),
+            rvec,
+            tvec,
+        )
