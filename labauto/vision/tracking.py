@@ -390,7 +390,10 @@ class MarkerTracker:
         """The observation of a coded marker; ``None`` for a centre circle cut off in part.
 
         The centroid of a whole (projected) circle's contour is the centre of its ellipse; an
-        occluder or the frame edge cutting the circle moves the two apart.
+        occluder or the frame edge cutting the circle moves the two apart. With ``fit``, a
+        bias-corrected centre further from the ellipse's centre than 0.25 px + 0.02 radii (more
+        than perspective can move it at these sizes) is not trusted: the ellipse's centre is
+        taken instead.
         """
         point = marker.center if self.fit else marker.centroid
         ellipse = marker.ellipse
@@ -403,6 +406,10 @@ class MarkerTracker:
             apart = math.hypot(centre[0] - marker.centroid[0], centre[1] - marker.centroid[1])
             if apart > 0.3 + 0.02 * radius:
                 return None
+            if self.fit and math.hypot(point[0] - centre[0], point[1] - centre[1]) > (
+                0.25 + 0.02 * radius
+            ):  # a perspective correction larger than any perspective bias: not trusted
+                point = centre
         return _Obs(int(marker.id), np.array([float(point[0]), float(point[1])]), radius)
 
     def _associate(
