@@ -15,3 +15,7 @@ except PackageNotFoundError:  # running from a source tree that is not installed
 from labauto.api import analyze_plate, detect, detect_markers
 
 __all__ = ["__version__", "analyze_plate", "detect", "detect_markers"]
+
+from labauto.vision.tracking import MarkerTracker
+
+__all__ += ["MarkerTracker"]

@@ -37,6 +37,10 @@ def _register_commands() -> None:
     cli.add_command(config_cmd.config_group)
     cli.add_command(db.db)
 
+    from labauto.cli import track_cmd
+
+    cli.add_command(track_cmd.track_cmd)
+
 
 _register_commands()
 
