@@ -6,8 +6,10 @@ enough, with ``amplitude_mm``, to leave the view and come back), turns and tilts
 and comes closer and goes away. Each frame is drawn with the exact-coverage marker renderer of
 :mod:`labauto.synthetic.markers` through the camera (``camera_map``), then optionally:
 
-* **motion blur**: the average of ``blur_steps`` renders spread over the exposure
-  (``exposure`` of the frame interval); the truth is the mean of the sub-frame centres;
+* **motion blur** (``motion_blur``): a line kernel along the board's mean image motion during
+  the exposure (``exposure`` of the frame interval; the mean displacement of the marker
+  centres between its start and end), symmetric about the frame's instant, so the truth stays
+  the centres at that instant (exact for a translation, an approximation for turns);
 * **light changes**: a gain that drifts over time and across the image;
 * **an occluder**: a grey bar crossing the view;
 * **noise**: Gaussian, ``noise_sigma`` grey levels.
@@ -22,6 +24,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from labauto.synthetic.markers import camera_map, draw_marker, finish
@@ -47,7 +50,7 @@ class SequenceSpec:
     amplitude_mm: tuple[float, float] = (120.0, 60.0)
     tilt_deg: float = 30.0
     period_frames: float = 120.0
-    blur_steps: int = 1
+    motion_blur: bool = False
     exposure: float = 0.5
     noise_sigma: float = 2.0
     light: bool = True
@@ -104,6 +107,38 @@ def _occluder(spec: SequenceSpec, t: float) -> tuple[int, int, int, int]:
     return (x0, 0, x0 + 90, spec.height)
 
 
+def _mean_motion(
+    spec: SequenceSpec, points: dict[int, tuple[float, float, float]], t: float
+) -> np.ndarray:
+    """Mean image displacement of the markers during the exposure around frame ``t``."""
+    k, d = spec.camera_matrix, np.asarray(spec.dist_coeffs, np.float64)
+    xy = np.array([(x, y) for x, y, _z in points.values()])
+    ends = []
+    for dt in (-spec.exposure / 2, spec.exposure / 2):
+        rvec, tvec = board_pose(spec, t + dt)
+        ends.append(camera_map(k, d, rvec, tvec)(xy))
+    return (ends[1] - ends[0]).mean(axis=0)
+
+
+def _motion_blur(image: np.ndarray, motion: np.ndarray) -> np.ndarray:
+    """Blur along ``motion`` (pixels) with a normalised line kernel centred on the pixel."""
+    length = float(np.hypot(*motion))
+    if length < 0.5:
+        return image
+    half = int(np.ceil(length / 2)) + 1
+    kernel = np.zeros((2 * half + 1, 2 * half + 1), np.float32)
+    for s in np.linspace(-0.5, 0.5, max(int(4 * length), 2)):
+        x, y = half + s * motion[0], half + s * motion[1]
+        x0, y0 = int(np.floor(x)), int(np.floor(y))
+        fx, fy = x - x0, y - y0
+        kernel[y0, x0] += (1 - fx) * (1 - fy)
+        kernel[y0, x0 + 1] += fx * (1 - fy)
+        kernel[y0 + 1, x0] += (1 - fx) * fy
+        kernel[y0 + 1, x0 + 1] += fx * fy
+    kernel /= kernel.sum()
+    return cv2.filter2D(image, -1, kernel, borderType=cv2.BORDER_REPLICATE)
+
+
 def render_sequence(
     spec: SequenceSpec, n_frames: int, rng: np.random.Generator, start: int = 0
 ) -> Iterator[SequenceFrame]:
@@ -115,30 +150,22 @@ def render_sequence(
     )
     xx = np.arange(spec.width)[None, :]
     for index in range(start, start + n_frames):
-        steps = max(spec.blur_steps, 1)
-        offsets = np.linspace(-spec.exposure / 2, spec.exposure / 2, steps) if steps > 1 else [0.0]
-        accum = np.zeros((spec.height, spec.width))
-        sums: dict[int, np.ndarray] = {mid: np.zeros(2) for mid in points}
+        rvec, tvec = board_pose(spec, index)
+        to_image = camera_map(k, d, rvec, tvec)
+        image = np.full((spec.height, spec.width), spec.paper)
+        centers: dict[int, tuple[float, float]] = {}
         extents: dict[int, np.ndarray] = {}
-        for dt in offsets:
-            rvec, tvec = board_pose(spec, index + dt)
-            to_image = camera_map(k, d, rvec, tvec)
-            image = np.full((spec.height, spec.width), spec.paper)
-            for mid, (x, y, _z) in points.items():
-                ring = to_image(np.array([x, y]) + RING_OUTER * spec.radius_mm * outline)
-                quiet = to_image(np.array([x, y]) + QUIET_RADIUS * spec.radius_mm * outline)
-                extents[mid] = ring
-                center = to_image(np.array([[x, y]]))[0]
-                sums[mid] += center
-                lo, hi = quiet.min(axis=0), quiet.max(axis=0)
-                if hi[0] < 0 or hi[1] < 0 or lo[0] > spec.width - 1 or lo[1] > spec.height - 1:
-                    continue
-                draw_marker(image, mid, (x, y), spec.radius_mm, to_image=to_image, ink=spec.ink)
-            accum += image
-        image = accum / len(offsets)
-        centers = {
-            mid: (float(s[0] / len(offsets)), float(s[1] / len(offsets))) for mid, s in sums.items()
-        }
+        for mid, (x, y, _z) in points.items():
+            extents[mid] = to_image(np.array([x, y]) + RING_OUTER * spec.radius_mm * outline)
+            quiet = to_image(np.array([x, y]) + QUIET_RADIUS * spec.radius_mm * outline)
+            cx, cy = to_image(np.array([[x, y]]))[0]
+            centers[mid] = (float(cx), float(cy))
+            lo, hi = quiet.min(axis=0), quiet.max(axis=0)
+            if hi[0] < 0 or hi[1] < 0 or lo[0] > spec.width - 1 or lo[1] > spec.height - 1:
+                continue
+            draw_marker(image, mid, (x, y), spec.radius_mm, to_image=to_image, ink=spec.ink)
+        if spec.motion_blur:
+            image = _motion_blur(image, _mean_motion(spec, points, index))
         if spec.light:
             phase = 2 * np.pi * index / spec.period_frames
             gain = 0.85 + 0.15 * np.sin(phase) + 0.1 * np.cos(phase) * (xx / spec.width - 0.5)
@@ -155,7 +182,6 @@ def render_sequence(
             clear = box is None or hi[0] < box[0] - 2 or lo[0] > box[2] + 2
             if inside and clear:
                 visible.add(mid)
-        rvec, tvec = board_pose(spec, index)
         yield SequenceFrame(
             index,
             finish(image, noise_sigma=spec.noise_sigma, rng=rng),

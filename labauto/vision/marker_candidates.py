@@ -39,10 +39,15 @@ class CentreCandidates:
         (n, 2) DES centroids, pixels.
     radii : ndarray
         (n,) area-equivalent radii, pixels.
+    asymmetry : ndarray
+        (n,) distance between the area centroid and the mean of the contour's points, pixels.
+        A whole circle or ellipse (also projected, also blurred) is centrally symmetric, so the
+        two agree to the edge noise; a circle cut by an occluder or the frame edge is not.
     """
 
     centroids: np.ndarray
     radii: np.ndarray
+    asymmetry: np.ndarray
 
     def __len__(self) -> int:
         return len(self.radii)
@@ -65,12 +70,16 @@ def centre_candidates(grey: np.ndarray, params: MarkerParams | None = None) -> C
     params = params or MarkerParams()
     contours = extract_contours(grey, params.detector_params())
     if not len(contours):
-        return CentreCandidates(np.zeros((0, 2)), np.zeros(0))
+        return CentreCandidates(np.zeros((0, 2)), np.zeros(0), np.zeros(0))
     angles = shape_angles(contours.points, contours.gradients, contours.offsets, contours.closed)
     radius = np.sqrt(np.maximum(angles.area, 0.0) / np.pi)
     keep = angles.is_des(params.des_threshold_deg)
     keep &= (radius >= params.min_radius_px * 0.5) & (radius <= params.max_radius_px * 1.2)
-    return CentreCandidates(np.asarray(angles.centroid[keep], np.float64), radius[keep])
+    lengths = np.maximum(contours.lengths, 1)
+    means = np.add.reduceat(contours.points, contours.offsets[:-1], axis=0) / lengths[:, None]
+    centroids = np.asarray(angles.centroid, np.float64)
+    asymmetry = np.hypot(*(centroids - means).T)
+    return CentreCandidates(centroids[keep], radius[keep], asymmetry[keep])
 
 
 def read_markers_at(

@@ -44,18 +44,20 @@ Searching
     the DES of a centre circle's size, with contours and the shape angle only
     (:func:`labauto.vision.marker_candidates.centre_candidates`, no fits, no code reads). A
     candidate continues the track of a marker seen in the previous frame when it is the one
-    candidate near that marker's prediction (within the allowance and within 1.2 centre radii +
-    2 px, nearer than the code ring's sectors, which can pass for a centre circle; further off,
-    the code decides; area-equivalent radius within 0.9-1.11 of the marker's reference radius,
-    so a centre circle cut by an occluder or the frame edge is not taken; the reference follows
-    a candidate only when it is within 3 %, so a circle being covered bit by bit cannot drag it
-    down; a code read resets it), the next candidate more than twice as far plus 2 px) and near
-    no other marker's prediction. Codes are read, by the whole detector in small windows
+    candidate near that marker's prediction: within the allowance and within one centre radius +
+    1 px (nearer than the code ring's sectors, which can pass for a centre circle; further off,
+    the code decides), whole (its area centroid and the mean of its contour points within 0.45
+    px + 0.02 radii: a circle cut by an occluder or the frame edge is not centrally symmetric, a
+    projected, blurred circle is), with an area-equivalent radius within 0.8-1.25 of the
+    marker's reference radius (which follows a candidate only when within 8 %, so a circle
+    covered bit by bit cannot drag it along; a code read resets it), and the next candidate more
+    than twice as far plus 2 px; and it is near no other marker's prediction. Codes are read, by
+    the whole detector in small windows
     (:func:`~labauto.vision.marker_candidates.read_markers_at`), only where that does not
     decide: a candidate two markers compete for or a marker with two candidates, a candidate in
-    the window of a lost (coasting) marker, and in a full-frame search every candidate no marker
-    took (new markers). With ``fit=True`` (fitted, bias-corrected centres) or a detector of
-    one's own, every search runs the whole detector on the searched pixels instead.
+    the window of a lost (coasting) marker, and in a full-frame search every whole candidate no
+    marker took (new markers). With ``fit=True`` (fitted, bias-corrected centres) or a detector
+    of one's own, every search runs the whole detector on the searched pixels instead.
 Id-swap guard
     A marker's identity is its decoded code: a coded detection can only continue the track of
     its own id, never another's, and a track is taken up by position only from one frame to the
@@ -182,6 +184,7 @@ class _Obs:
     id: int | None
     position: np.ndarray
     radius: float
+    whole: bool = True  # a centre candidate that is centrally symmetric (not cut off)
 
 
 @dataclass
@@ -371,7 +374,7 @@ class MarkerTracker:
             tile = mosaic.owner_of((float(obs.position[0]), float(obs.position[1])))
             if tile is not None:  # else in the padding: a piece of an object cut by its window
                 offset = mosaic.offsets[tile].astype(np.float64)
-                observed.append(_Obs(obs.id, obs.position - offset, obs.radius))
+                observed.append(_Obs(obs.id, obs.position - offset, obs.radius, obs.whole))
         return self._associate(observed, frame, windows=windows)
 
     def _observe(self, image: np.ndarray) -> list[_Obs]:
@@ -380,8 +383,9 @@ class MarkerTracker:
             from labauto.vision.marker_candidates import centre_candidates
 
             found = centre_candidates(image, self.params)
+            whole = found.asymmetry <= 0.45 + 0.02 * found.radii
             return [
-                _Obs(None, found.centroids[i].copy(), float(found.radii[i]))
+                _Obs(None, found.centroids[i].copy(), float(found.radii[i]), bool(whole[i]))
                 for i in range(len(found))
             ]
         return _present(self._coded(marker) for marker in self.detect(image))
@@ -438,6 +442,7 @@ class MarkerTracker:
         """
         positions = np.array([c.position for c in candidates])
         radii = np.array([c.radius for c in candidates])
+        whole = np.array([c.whole for c in candidates])
         claims: dict[int, list[int]] = {}
         choice: dict[int, int | None] = {}
         coasting: set[int] = set()
@@ -446,11 +451,12 @@ class MarkerTracker:
                 continue
             predicted = self._prediction(track)
             reach = self._half_size(track) - track.radius * self.extent_factor + 1.0
-            if not track.missed:  # never as far as the code ring's sectors (2-3 radii out)
-                reach = min(reach, 1.2 * track.radius + 2.0)
             offset = np.abs(positions - predicted).max(axis=1)
+            if not track.missed:  # never as far as the code ring's sectors (2-3 radii out)
+                reach = min(reach, track.radius + 1.0)
+                offset = np.hypot(*(positions - predicted).T)
             ratio = radii / max(track.radius, 1e-6)
-            eligible = np.flatnonzero((offset <= reach) & (ratio >= 0.9) & (ratio <= 1.11))
+            eligible = np.flatnonzero((offset <= reach) & whole & (ratio >= 0.8) & (ratio <= 1.25))
             for k in eligible.tolist():
                 claims.setdefault(k, []).append(track.id)
             if track.missed:
@@ -477,7 +483,7 @@ class MarkerTracker:
         to_read.update(k for k in coasting if not _near_any(positions[k], taken, found))
         if full:
             for k in range(len(candidates)):
-                if k not in claims and not _near_any(positions[k], taken, found):
+                if k not in claims and whole[k] and not _near_any(positions[k], taken, found):
                     to_read.add(k)
         return [candidates[k] for k in sorted(to_read)]
 
@@ -548,7 +554,7 @@ class MarkerTracker:
             track.velocity = (hit.position - track.position) / max(dt, 1)
             track.known_velocity = True
             track.position = hit.position
-            if hit.id is not None or abs(hit.radius / track.radius - 1.0) <= 0.03:
+            if hit.id is not None or abs(hit.radius / track.radius - 1.0) <= 0.08:
                 track.radius = hit.radius
             track.last_frame = index
             track.missed = 0
