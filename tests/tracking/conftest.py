@@ -46,3 +46,8 @@ def still_sequence():
         noise_sigma=2.0,
     )
     return spec, list(render_sequence(spec, 16, np.random.default_rng(16)))
+
+
+@pytest.fixture(scope="session")
+def hard_spec() -> SequenceSpec:
+    return HARD

@@ -8,6 +8,8 @@ swinging partly out of the view and back. Figures are checked loosely; the bench
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -25,7 +27,7 @@ def tracked(hard_sequence):
 def test_the_sequence_has_what_it_must_show(hard_sequence):
     counts = [len(f.visible) for f in hard_sequence]
     assert max(counts) == 12 and min(counts) <= 8  # markers leave the view and come back
-    entries = sum(len(b.visible - a.visible) for a, b in zip(hard_sequence, hard_sequence[1:]))
+    entries = sum(len(b.visible - a.visible) for a, b in itertools.pairwise(hard_sequence))
     assert entries >= 5
 
 
@@ -51,7 +53,7 @@ def test_most_frames_are_searched_in_windows_and_the_interval_holds(tracked):
     modes = [r.mode for r in results]
     assert modes.count("roi") >= 0.6 * len(modes)
     full = [r.frame for r in results if r.mode == "full"]
-    assert all(b - a <= 10 for a, b in zip(full, full[1:]))  # never longer than the interval
+    assert all(b - a <= 10 for a, b in itertools.pairwise(full))  # never longer than the interval
     assert {r.frame for r in results if r.lost} <= set(full)  # a loss is confirmed whole-frame
     assert np.median(tracker.stats.window_pixels) < 0.2 * 800 * 600
 
