@@ -27,6 +27,8 @@ def cli(ctx: click.Context, debug: bool) -> None:
 
 def _register_commands() -> None:
     from labauto.cli import config_cmd, db, plugins_cmd, run_cmds, vision_cmds
+    from labauto.cli.calibrate_cmd import calibrate_group
+    from labauto.cli.markers_cmd import markers_group
 
     cli.add_command(vision_cmds.detect_cmd)
     cli.add_command(vision_cmds.plate_cmd)
@@ -36,6 +38,8 @@ def _register_commands() -> None:
     cli.add_command(run_cmds.devices)
     cli.add_command(config_cmd.config_group)
     cli.add_command(db.db)
+    cli.add_command(markers_group)
+    cli.add_command(calibrate_group)
 
     from labauto.cli import track_cmd
 

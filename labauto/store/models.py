@@ -253,3 +253,27 @@ class Event(Base):
     source: Mapped[str] = mapped_column(String(64))
     message: Mapped[str] = mapped_column(Text)
     data: Mapped[Any | None] = mapped_column(JSON)
+
+
+class CalibrationRecord(Base):
+    """A stored camera or deck calibration (``labauto calibrate camera|deck --save NAME``).
+
+    ``kind`` is ``camera`` (intrinsics and distortion) or ``deck`` (a camera calibration plus
+    the camera's pose over the deck). Several rows may share a name: the newest is the one in
+    force. ``data`` keeps the whole JSON document of the calibration (views, pose, residuals).
+    """
+
+    __tablename__ = "calibrations"
+    __table_args__ = (Index(None, "name"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    kind: Mapped[str] = mapped_column(String(16))
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    image_width: Mapped[int] = mapped_column(Integer)
+    image_height: Mapped[int] = mapped_column(Integer)
+    rms_px: Mapped[float | None] = mapped_column(Float)
+    residual_mm: Mapped[float | None] = mapped_column(Float)
+    camera_matrix: Mapped[Any] = mapped_column(JSON)
+    dist_coeffs: Mapped[Any] = mapped_column(JSON)
+    data: Mapped[Any | None] = mapped_column(JSON)

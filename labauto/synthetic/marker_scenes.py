@@ -11,6 +11,7 @@ its id and the exact image of its centre (not the centre of its ellipse).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -19,6 +20,9 @@ import numpy as np
 from labauto.synthetic import shapes
 from labauto.synthetic.markers import draw_marker, fill_polygons, finish, homography_map
 from labauto.vision.marker_codes import QUIET_RADIUS, n_codes
+
+#: Draws a marker of some id under a homography into a float image; returns its true centre.
+Painter = Callable[[np.ndarray, int, np.ndarray, float], tuple[float, float]]
 
 
 @dataclass(frozen=True)
@@ -105,11 +109,15 @@ def marker_scene(
     blur_sigma: float = 1.0,
     noise_sigma: float = 2.0,
     light_gain: tuple[float, float] = (0.7, 1.0),
+    painter: Painter | None = None,
 ) -> tuple[np.ndarray, list[SceneMarker]]:
     """Render one scene; returns the uint8 grey image and the markers' truth.
 
     Markers get distinct random ids; rectangles and artefacts are placed where no marker's quiet
     zone is. ``light_gain`` spans the smooth illumination field (a tilted plane plus a bump).
+    ``painter(image, id, homography, ink)`` draws another kind of marker in the same place (the
+    plane's unit is one centre radius, the marker spanning +-3.6 units) and returns its true
+    centre, e.g. an ArUco marker for a benchmark; by default our coded marker is drawn.
     """
     img = np.full((height, width), float(paper))
     placed: list[tuple[float, float, float]] = []
@@ -126,9 +134,12 @@ def marker_scene(
             raise ValueError("scene too crowded for the markers")
         tilt = float(rng.uniform(0.0, max_tilt_deg))
         hom = tilted_plane((x, y), r, tilt, rng.uniform(0, 180), rng.uniform(0, 360))
-        center = draw_marker(
-            img, int(marker_id), (0.0, 0.0), 1.0, to_image=homography_map(hom), ink=ink
-        )
+        if painter is None:
+            center = draw_marker(
+                img, int(marker_id), (0.0, 0.0), 1.0, to_image=homography_map(hom), ink=ink
+            )
+        else:
+            center = painter(img, int(marker_id), hom, ink)
         placed.append((x, y, reach))
         truth.append(SceneMarker(int(marker_id), center, r, tilt, hom))
     others: list[shapes.Shape] = []

@@ -29,6 +29,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from labauto.vision.concentric import projected_center
 from labauto.vision.ellipse import Ellipse
 from labauto.vision.ellipse_fit import fit_ellipses_geometric_batch
 from labauto.vision.marker_codes import N_BITS, RING_INNER, RING_OUTER
@@ -81,7 +82,7 @@ def refine_circles(
     bit0: list[float],
     min_contrast: float,
     max_passes: int = 6,
-    tol_px: float = 0.005,
+    tol_px: float = 0.01,
 ) -> list[Circles]:
     """Fits of the centre circle and the code ring's inner and outer edges of every marker.
 
@@ -101,9 +102,9 @@ def refine_circles(
         Each pass after the first measures along rays laid out from the previous fits, so that
         every window is centred on its edge (its truncation cancels) and, under strong
         perspective, the ring's rays follow the ring's own ellipse rather than the scaled centre
-        circle. A marker is measured again until no circle's centre moves more than ``tol_px``
-        (two passes for a small marker, up to four or five for one seen with strong
-        perspective), at most ``max_passes`` times.
+        circle. A marker is measured again until its centre (:func:`marker_center`) moves less
+        than ``tol_px`` (three passes for a small marker, up to five or six for one seen with
+        strong perspective), at most ``max_passes`` times.
 
     Returns
     -------
@@ -123,8 +124,13 @@ def refine_circles(
     which = np.concatenate([r[1] for r in rays])
     _, centre_maps = affine_frames(ellipses)
     unit = np.column_stack((np.cos(theta), np.sin(theta)))
+    # every ray keeps its image direction (from the first fit's frame, where the sectors were
+    # read) through all passes; only its start (the circle's centre) and its expected crossing
+    # follow the fits. (A frame's rotation is arbitrary for a near-circle: re-deriving the
+    # directions from each new fit could turn the ring's rays onto the sector ends.)
+    direction = np.einsum("kij,kj->ki", centre_maps[owner], unit)
+    reach = np.hypot(direction[:, 0], direction[:, 1])
     # the window stays clear of the neighbouring circle (one centre radius away)
-    reach = np.hypot(*np.einsum("kij,kj->ki", centre_maps[owner], unit).T)
     half = np.minimum(WINDOW_PX, 0.45 * reach)
     result: list[Circles] = [(None, None, None)] * len(ellipses)
     active = np.ones(len(ellipses), bool)
@@ -134,40 +140,53 @@ def refine_circles(
         live = active[owner]
         index = (owner * 3 + which)[live]
         edge, usable = _measure(
-            grey, centres[index], maps[index], unit[live], half[live], min_contrast
+            grey, centres[index], maps[index], direction[live], half[live], min_contrast
         )
         fits = _fit_sets(guess, edge, owner[live], which[live], usable)
         for m in np.flatnonzero(active).tolist():
-            moved = [
-                np.hypot(new.center[0] - old.center[0], new.center[1] - old.center[1])
-                for new, old in zip(fits[m], guess[m], strict=True)
-                if new is not None
-            ]
+            centre = marker_center(fits[m])
+            before = marker_center(result[m])
             result[m] = fits[m]
             guess[m] = tuple(
                 f if f is not None else g for f, g in zip(fits[m], guess[m], strict=True)
             )
-            active[m] = bool(moved) and max(moved) > tol_px
+            active[m] = centre is not None and (
+                before is None or np.hypot(centre[0] - before[0], centre[1] - before[1]) > tol_px
+            )
         if not active.any():
             break
     return result
+
+
+def marker_center(circles: Circles) -> tuple[float, float] | None:
+    """The projected centre from the fits: the centre circle with the outer ring edge (radius
+    ratio 3, the best-conditioned pair), or with the inner edge when the outer one failed."""
+    centre, inner, outer = circles
+    ring = outer if outer is not None else inner
+    if centre is None or ring is None:
+        return None
+    return projected_center([centre, ring])
 
 
 def _measure(
     grey: np.ndarray,
     centres: np.ndarray,
     maps: np.ndarray,
-    unit: np.ndarray,
+    direction: np.ndarray,
     half: np.ndarray,
     min_contrast: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Edge point along every ray ``centre + rho * map @ unit`` near ``rho = 1``, and its use."""
+    """Edge point along every ray ``centre + s * direction`` near the ellipse ``(centre, map)``,
+    and whether it is usable."""
     n_samples = round(2 * WINDOW_PX / STEP_PX)
     grid = ((np.arange(n_samples) + 0.5) / n_samples * 2.0 - 1.0).astype(np.float32)
-    direction = maps[:, :, 0] * unit[:, :1] + maps[:, :, 1] * unit[:, 1:]  # px per frame unit
+    # expected crossing: |map^-1 (s0 direction)| = 1
+    local = np.linalg.solve(maps, direction[:, :, None])[:, :, 0]
+    s0 = 1.0 / np.hypot(local[:, 0], local[:, 1])
     px_per_unit = np.hypot(direction[:, 0], direction[:, 1])
-    # sample j of a ray is at centre + direction * (1 + grid_j * half / px_per_unit)
-    along = (half / px_per_unit).astype(np.float32)[:, None] * grid[None, :] + np.float32(1.0)
+    along = (half / px_per_unit).astype(np.float32)[:, None] * grid[None, :] + s0.astype(
+        np.float32
+    )[:, None]
     mx = centres[:, :1].astype(np.float32) + direction[:, :1].astype(np.float32) * along
     my = centres[:, 1:].astype(np.float32) + direction[:, 1:].astype(np.float32) * along
     prof = cv2.remap(grey, mx, my, cv2.INTER_LINEAR, cv2.BORDER_REPLICATE)
@@ -179,7 +198,7 @@ def _measure(
     ones = n_samples - (total - n_samples * start) / np.where(usable, step, 1.0)
     edge_px = -half + ones * (2.0 * half / n_samples)
     usable &= np.abs(edge_px) < half
-    edge = centres + (1.0 + edge_px / px_per_unit)[:, None] * direction
+    edge = centres + (s0 + edge_px / px_per_unit)[:, None] * direction
     return edge, usable
 
 

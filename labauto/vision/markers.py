@@ -46,14 +46,13 @@ from dataclasses import dataclass, fields, replace
 import cv2
 import numpy as np
 
-from labauto.vision.concentric import projected_center
 from labauto.vision.contours import Contours
 from labauto.vision.detector import DetectorParams, extract_contours, validate_params
 from labauto.vision.ellipse import Ellipse
 from labauto.vision.ellipse_fit import fit_selected_ellipses
 from labauto.vision.gradient import as_uint8_image
 from labauto.vision.marker_codes import N_BITS, RING_OUTER, decode_words
-from labauto.vision.marker_edges import affine_frames, refine_circles
+from labauto.vision.marker_edges import affine_frames, marker_center, refine_circles
 from labauto.vision.shape_angle import shape_angles
 
 #: Samples per sector along the ring, and the ring radii sampled (centre radii).
@@ -340,10 +339,8 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
     out = []
     for (marker_id, j), (centre_fit, inner, outer) in zip(chosen, circles, strict=True):
         e = centre_fit if centre_fit is not None else ellipses[j]
-        # the centre circle with the outer ring edge is the best-conditioned pair (radius ratio
-        # 3); the inner edge stands in when the outer one could not be fitted
-        ring = (outer,) if outer is not None else (inner,) if inner is not None else ()
-        centre = projected_center([e, *ring]) if centre_fit is not None and ring else None
+        centre = marker_center((centre_fit, inner, outer))
+        ring = tuple(r for r in (inner, outer) if r is not None)
         cx, cy = angles.centroid[keep[j]]
         out.append(
             Marker(

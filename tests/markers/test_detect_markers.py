@@ -65,7 +65,7 @@ def test_light_on_dark_markers_read_alike() -> None:
 
 
 def test_a_window_gives_the_same_marker_offset() -> None:
-    image, centre = _one_marker(tilt=40.0)
+    image, _centre = _one_marker(tilt=40.0)
     (full,) = detect_markers(image)
     x0, y0 = 31, 17
     (part,) = detect_markers(image[y0 : y0 + 170, x0 : x0 + 190])
@@ -99,7 +99,7 @@ def test_rectangles_dots_and_uncoded_rings_get_no_id() -> None:
 
 
 def test_json_form_and_the_public_api(tmp_path) -> None:
-    image, centre = _one_marker(tilt=20.0)
+    image, _centre = _one_marker(tilt=20.0)
     result = find_markers(image)
     doc = result.to_dict()
     (entry,) = doc["markers"]

@@ -30,6 +30,7 @@ TABLES = {
     "picks",
     "analyzer_results",
     "events",
+    "calibrations",
 }
 
 
@@ -63,13 +64,14 @@ def test_packaged_migrations_are_found():
     assert (folder / "script.py.mako").is_file()
     assert (folder / "versions" / "0001_initial.py").is_file()
     assert (folder / "versions" / "0002_run_integrity.py").is_file()
-    assert head_revision() == "0002"
+    assert (folder / "versions" / "0003_calibrations.py").is_file()
+    assert head_revision() == "0003"
 
 
 def test_upgrade_downgrade_upgrade(db_url):
     upgrade(db_url)
     assert _tables(db_url) == TABLES
-    assert current_revision(db_url) == "0002"
+    assert current_revision(db_url) == "0003"
 
     downgrade(db_url, "base")
     assert _tables(db_url) == set()
@@ -177,4 +179,4 @@ def test_unknown_revision_raises_migration_error_naming_url_and_revision(db_url)
     upgrade(db_url)
     with pytest.raises(MigrationError, match=r"downgrade to 'nonexistent' failed for 'sqlite:///"):
         downgrade(db_url, "nonexistent")
-    assert current_revision(db_url) == "0002"
+    assert current_revision(db_url) == "0003"
