@@ -21,13 +21,13 @@ occluder. The pose of the board (``rvec``, ``tvec``, board to camera, mm) is giv
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-from labauto.synthetic.markers import camera_map, draw_marker, finish
+from labauto.synthetic.markers import PlaneToImage, camera_map, draw_marker, finish
 from labauto.vision.marker_codes import QUIET_RADIUS, RING_OUTER
 
 __all__ = ["SequenceFrame", "SequenceSpec", "board_points", "render_sequence"]
@@ -139,8 +139,17 @@ def _motion_blur(image: np.ndarray, motion: np.ndarray) -> np.ndarray:
     return cv2.filter2D(image, -1, kernel, borderType=cv2.BORDER_REPLICATE)
 
 
+#: ``painter(image, id, (x, y) mm, radius_mm, to_image, ink)`` draws another kind of marker
+#: (e.g. an ArUco square for a comparison) in a marker's place.
+Painter = Callable[[np.ndarray, int, tuple[float, float], float, PlaneToImage, float], None]
+
+
 def render_sequence(
-    spec: SequenceSpec, n_frames: int, rng: np.random.Generator, start: int = 0
+    spec: SequenceSpec,
+    n_frames: int,
+    rng: np.random.Generator,
+    start: int = 0,
+    painter: Painter | None = None,
 ) -> Iterator[SequenceFrame]:
     """Render frames ``start .. start + n_frames - 1`` (see the module docstring)."""
     points = board_points(spec)
@@ -163,7 +172,10 @@ def render_sequence(
             lo, hi = quiet.min(axis=0), quiet.max(axis=0)
             if hi[0] < 0 or hi[1] < 0 or lo[0] > spec.width - 1 or lo[1] > spec.height - 1:
                 continue
-            draw_marker(image, mid, (x, y), spec.radius_mm, to_image=to_image, ink=spec.ink)
+            if painter is None:
+                draw_marker(image, mid, (x, y), spec.radius_mm, to_image=to_image, ink=spec.ink)
+            else:
+                painter(image, mid, (x, y), spec.radius_mm, to_image, spec.ink)
         if spec.motion_blur:
             image = _motion_blur(image, _mean_motion(spec, points, index))
         if spec.light:

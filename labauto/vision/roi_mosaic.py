@@ -81,18 +81,22 @@ class Mosaic:
     offsets: np.ndarray
     tiles: np.ndarray
 
-    def owner_of(self, point: tuple[float, float], inset: float = 0.0) -> int | None:
-        """The tile whose window contains mosaic ``point`` at least ``inset`` px inside, or None."""
-        x, y = point
-        t = self.tiles
+    def owners(self, points: np.ndarray) -> np.ndarray:
+        """(n,) index of the tile whose window holds each mosaic point, -1 for the padding."""
+        p = np.asarray(points, np.float64).reshape(-1, 1, 2)
+        t = self.tiles[None, :, :]
         inside = (
-            (x >= t[:, 0] - 0.5 + inset)
-            & (x <= t[:, 2] - 0.5 - inset)
-            & (y >= t[:, 1] - 0.5 + inset)
-            & (y <= t[:, 3] - 0.5 - inset)
+            (p[..., 0] >= t[..., 0] - 0.5)
+            & (p[..., 0] <= t[..., 2] - 0.5)
+            & (p[..., 1] >= t[..., 1] - 0.5)
+            & (p[..., 1] <= t[..., 3] - 0.5)
         )
-        hits = np.flatnonzero(inside)
-        return int(hits[0]) if len(hits) else None
+        return np.where(inside.any(axis=1), inside.argmax(axis=1), -1)
+
+    def owner_of(self, point: tuple[float, float]) -> int | None:
+        """The tile whose window contains mosaic ``point``, or None (in the padding)."""
+        tile = int(self.owners(np.asarray(point))[0])
+        return tile if tile >= 0 else None
 
     def to_frame(self, tile: int, point: tuple[float, float]) -> tuple[float, float]:
         """Mosaic ``point`` of ``tile`` in frame pixels."""

@@ -369,12 +369,13 @@ class MarkerTracker:
             return {}
         mosaic = build_mosaic(frame, merge_overlapping(list(windows.values())))
         self.stats.window_pixels.append(int(mosaic.image.shape[0] * mosaic.image.shape[1]))
-        observed = []
-        for obs in self._observe(mosaic.image):
-            tile = mosaic.owner_of((float(obs.position[0]), float(obs.position[1])))
-            if tile is not None:  # else in the padding: a piece of an object cut by its window
-                offset = mosaic.offsets[tile].astype(np.float64)
-                observed.append(_Obs(obs.id, obs.position - offset, obs.radius, obs.whole))
+        inside = self._observe(mosaic.image)
+        tiles = mosaic.owners(np.array([o.position for o in inside]).reshape(-1, 2))
+        observed = [  # a tile of -1: in the padding, a piece of an object cut by its window
+            _Obs(o.id, o.position - mosaic.offsets[t], o.radius, o.whole)
+            for o, t in zip(inside, tiles.tolist(), strict=True)
+            if t >= 0
+        ]
         return self._associate(observed, frame, windows=windows)
 
     def _observe(self, image: np.ndarray) -> list[_Obs]:
@@ -438,52 +439,53 @@ class MarkerTracker:
     ) -> list[_Obs]:
         """Give tracks seen in the previous frame their one clear candidate (into ``found``).
 
-        Returns the candidates whose code must be read.
+        Returns the candidates whose code must be read. Vectorised over tracks x candidates.
         """
+        tracks = [t for t in self._tracks.values() if t.missed <= self.coast_frames]
         positions = np.array([c.position for c in candidates])
         radii = np.array([c.radius for c in candidates])
         whole = np.array([c.whole for c in candidates])
-        claims: dict[int, list[int]] = {}
-        choice: dict[int, int | None] = {}
-        coasting: set[int] = set()
-        for track in self._tracks.values():
-            if track.missed > self.coast_frames:
-                continue
-            predicted = self._prediction(track)
-            reach = self._half_size(track) - track.radius * self.extent_factor + 1.0
-            offset = np.abs(positions - predicted).max(axis=1)
-            if not track.missed:  # never as far as the code ring's sectors (2-3 radii out)
-                reach = min(reach, track.radius + 1.0)
-                offset = np.hypot(*(positions - predicted).T)
-            ratio = radii / max(track.radius, 1e-6)
-            eligible = np.flatnonzero((offset <= reach) & whole & (ratio >= 0.8) & (ratio <= 1.25))
-            for k in eligible.tolist():
-                claims.setdefault(k, []).append(track.id)
-            if track.missed:
-                coasting.update(eligible.tolist())
-                continue
-            distance = np.hypot(*(positions[eligible] - predicted).T) if len(eligible) else []
-            order = np.argsort(distance)
-            if len(eligible) == 1 or (
-                len(eligible) > 1 and distance[order[1]] > 2.0 * distance[order[0]] + 2.0
-            ):
-                choice[track.id] = int(eligible[order[0]])
-            elif len(eligible) > 1:
-                choice[track.id] = None
+        if not tracks:
+            eligible = np.zeros((0, len(candidates)), bool)
+            missed = np.zeros(0, np.int64)
+        else:
+            predicted = np.array([self._prediction(t) for t in tracks])
+            half = np.array([self._half_size(t) for t in tracks])
+            radius = np.array([t.radius for t in tracks])
+            missed = np.array([t.missed for t in tracks])
+            delta = positions[None, :, :] - predicted[:, None, :]
+            box = np.abs(delta).max(axis=2)
+            euclid = np.hypot(delta[..., 0], delta[..., 1])
+            reach = half - radius * self.extent_factor + 1.0
+            # seen last frame: never as far as the code ring's sectors (2-3 radii out)
+            continuing = missed == 0
+            reach = np.where(continuing, np.minimum(reach, radius + 1.0), reach)
+            offset = np.where(continuing[:, None], euclid, box)
+            ratio = radii[None, :] / np.maximum(radius, 1e-6)[:, None]
+            eligible = (
+                (offset <= reach[:, None]) & whole[None, :] & (ratio >= 0.8) & (ratio <= 1.25)
+            )
+        claimed = eligible.sum(axis=0)
         to_read: set[int] = set()
-        for tid, k in choice.items():
-            if k is not None and claims[k] == [tid]:
-                found[tid] = candidates[k]
+        for row in np.flatnonzero(missed == 0):
+            options = np.flatnonzero(eligible[row])
+            if len(options) == 0:
+                continue
+            distance = euclid[row, options]
+            order = np.argsort(distance)
+            best = int(options[order[0]])
+            clear = len(options) == 1 or distance[order[1]] > 2.0 * distance[order[0]] + 2.0
+            if clear and claimed[best] == 1:
+                found[tracks[row].id] = candidates[best]
             else:
                 self.stats.ambiguous += 1
-                track = self._tracks[tid]
-                near = np.abs(positions - self._prediction(track)).max(axis=1)
-                to_read.update(np.flatnonzero(near <= self._half_size(track)).tolist())
-        taken = [o.position for o in found.values()]
-        to_read.update(k for k in coasting if not _near_any(positions[k], taken, found))
+                to_read.update(np.flatnonzero(box[row] <= half[row]).tolist())
+        taken = list(found.values())
+        coasting = np.flatnonzero(eligible[missed > 0].any(axis=0)) if len(tracks) else []
+        to_read.update(k for k in coasting if not _near_any(positions[k], taken))
         if full:
-            for k in range(len(candidates)):
-                if k not in claims and whole[k] and not _near_any(positions[k], taken, found):
+            for k in np.flatnonzero((claimed == 0) & whole).tolist():
+                if not _near_any(positions[k], taken):
                     to_read.add(k)
         return [candidates[k] for k in sorted(to_read)]
 
@@ -602,13 +604,12 @@ def _group_by_id(observed: list[_Obs]) -> dict[int, list[_Obs]]:
     return groups
 
 
-def _near_any(point: np.ndarray, taken: list[np.ndarray], found: dict[int, _Obs]) -> bool:
+def _near_any(point: np.ndarray, found: list[_Obs]) -> bool:
     """True when ``point`` lies within the code ring of a marker already found (its sectors)."""
     from labauto.vision.marker_codes import QUIET_RADIUS
 
     return any(
-        float(np.hypot(*(point - obs.position))) <= QUIET_RADIUS * obs.radius
-        for obs in found.values()
+        float(np.hypot(*(point - obs.position))) <= QUIET_RADIUS * obs.radius for obs in found
     )
 
 
