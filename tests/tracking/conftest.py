@@ -3,6 +3,8 @@ tracking_helpers.py)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -34,16 +36,8 @@ def hard_sequence():
 @pytest.fixture(scope="session")
 def still_sequence():
     """The same board, slower, no blur and no occluder: for the fitted-centre accuracy."""
-    spec = SequenceSpec(
-        rows=3,
-        cols=4,
-        width=800,
-        height=600,
-        focal_px=900.0,
-        distance_mm=450.0,
-        amplitude_mm=(40.0, 20.0),
-        period_frames=200.0,
-        noise_sigma=2.0,
+    spec = replace(
+        HARD, amplitude_mm=(40.0, 20.0), period_frames=200.0, motion_blur=False, occluder=False
     )
     return spec, list(render_sequence(spec, 16, np.random.default_rng(16)))
 
