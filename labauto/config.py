@@ -50,6 +50,7 @@ ENV_OVERRIDES: dict[str, str] = {
 Positive = Annotated[float, Field(gt=0)]
 NonNegative = Annotated[float, Field(ge=0)]
 Range = tuple[float, float]
+Range3 = tuple[float, float, float]
 
 
 class Section(BaseModel):
@@ -293,8 +294,62 @@ class CalibrationPoint(Section):
     deck: tuple[float, float]
 
 
+class HeadMarkerConfig(Section):
+    """The coded marker carried by the tool head (issue 14.5)."""
+
+    id: Annotated[int, Field(ge=0)] = 300
+    radius_mm: Positive = 1.5
+    offset_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+class DeckGridConfig(Section):
+    """Head positions of the automatic deck calibration: a grid at one or more heights."""
+
+    x_mm: Range = (44.0, 124.0)
+    y_mm: Range = (40.0, 102.0)
+    counts: tuple[Annotated[int, Field(ge=2)], Annotated[int, Field(ge=2)]] = (4, 3)
+    z_mm: Annotated[list[float], Field(min_length=1)] = [-5.0, -20.0]
+
+
+class DeckBoardConfig(Section):
+    """A coded board lying face up on the deck at a known place."""
+
+    path: str
+    origin_mm: tuple[float, float, float]
+    angle_deg: float = 0.0
+    image: str | None = None
+
+
+class SimulatedDeckCameraConfig(Section):
+    """The simulated camera over the deck (used when the robot is simulated)."""
+
+    camera_matrix: tuple[Range3, Range3, Range3] = ((1400.0, 0.0, 640.0), (0.0, 1400.0, 512.0),
+                                                    (0.0, 0.0, 1.0))  # fmt: skip
+    dist_coeffs: list[float] = [-0.1, 0.03, 0.0, 0.0, 0.0]
+    position_mm: tuple[float, float, float] = (84.0, 71.0, 140.0)
+    tilt_deg: Range = (2.0, -3.0)
+    image_size: tuple[Annotated[int, Field(gt=0)], Annotated[int, Field(gt=0)]] = (1280, 1024)
+
+
+class DeckCalibrationConfig(Section):
+    """``labauto calibrate deck``: the camera's pose over the deck (issue 14.5)."""
+
+    name: str = "deck"
+    camera: str | None = None
+    source: Literal["head", "board"] = "head"
+    surface_z_mm: float | None = None
+    head_marker: HeadMarkerConfig = HeadMarkerConfig()
+    grid: DeckGridConfig = DeckGridConfig()
+    board: DeckBoardConfig | None = None
+    simulated_camera: SimulatedDeckCameraConfig = SimulatedDeckCameraConfig()
+
+
 class CalibrationConfig(Section):
-    """Pixel-to-deck calibration from at least four point pairs (fiducials)."""
+    """Pixel-to-deck calibration: the stored deck calibration named ``deck.name`` when one
+    exists and ``use_stored`` is on, else a homography from at least four point pairs."""
+
+    use_stored: bool = True
+    deck: DeckCalibrationConfig = DeckCalibrationConfig()
 
     points: Annotated[list[CalibrationPoint], Field(min_length=4)] = [
         CalibrationPoint(pixel=(0.0, 0.0), deck=(20.0, 20.0)),

@@ -110,3 +110,63 @@ def list_cmd(config: Config) -> None:
             f"{r.id:4d}  {r.name}  {r.kind}  {r.image_size[0]}x{r.image_size[1]}  {rms}{extra}  "
             f"{r.created_at:%Y-%m-%d %H:%M}"
         )
+
+
+@calibrate_group.command("deck")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
+@click.option("--no-save", is_flag=True, help="Do not store it (runs would not use it).")
+@config_option
+def deck_cmd(as_json: bool, no_save: bool, config: Config) -> None:
+    """The camera's pose over the deck and the pixel-to-deck map (calibration.deck)."""
+    from labauto.deck_calibration import calibrate_deck
+    from labauto.store.calibrations import save_calibration
+
+    with _store(config) as store:
+        cal, report = calibrate_deck(config, store)
+        doc = {**cal.to_dict(), "camera": report["camera"], "source": report["source"]}
+        if "positions" in report:
+            doc["positions"] = report["positions"]
+        name = config.calibration.deck.name
+        if not no_save:
+            save_calibration(store.engine, name, "deck", doc, residual_mm=cal.residual_mm)
+    if as_json:
+        click.echo(json.dumps(doc, indent=2))
+        return
+    x, y, z = cal.camera_position()
+    click.echo(
+        f"deck calibration: residual {cal.residual_mm:.4f} mm (worst {cal.max_error_mm:.4f} mm) "
+        f"over {cal.n_points} points ({report['summary']}); camera at ({x:.1f}, {y:.1f}, "
+        f"{z:.1f}) mm" + ("" if no_save else f"; saved as {name!r}, runs will use it")
+    )
+
+
+@calibrate_group.command("simulate-views")
+@click.option("--board", "board_path", type=click.Path(dir_okay=False), required=True)
+@click.option("--out", "out", type=click.Path(file_okay=False), required=True)
+@click.option("--views", type=click.IntRange(min=1), default=12, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@config_option
+def simulate_views_cmd(board_path: str, out: str, views: int, seed: int, config: Config) -> None:
+    """Write views of a board held before the simulated deck camera (for a simulated workcell).
+
+    The camera is calibration.deck.simulated_camera; the board is tilted up to 50 degrees.
+    """
+    from pathlib import Path
+
+    import numpy as np
+
+    from labauto.board_files import read_board
+    from labauto.imageio import write_image
+    from labauto.synthetic.board_views import board_poses, render_board_view
+
+    board = read_board(board_path)
+    sim = config.calibration.deck.simulated_camera
+    k, d = np.array(sim.camera_matrix), np.array(sim.dist_coeffs)
+    rng = np.random.default_rng(seed)
+    folder = Path(out)
+    for i, (rvec, tvec) in enumerate(
+        board_poses(rng, views, board, k, d, sim.image_size, max_tilt_deg=50.0)
+    ):
+        image, _ = render_board_view(board, k, d, rvec, tvec, sim.image_size, rng=rng)
+        write_image(folder / f"view{i:02d}.png", image)
+    click.echo(f"{out}: {views} views of {board_path} by the simulated deck camera")

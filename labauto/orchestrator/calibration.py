@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from labauto.errors import CalibrationError
+from labauto.vision.deck import residual_check
 
 
 @dataclass(frozen=True)
@@ -78,13 +79,9 @@ class Calibration:
         if homography is None or not np.all(np.isfinite(homography)):
             raise CalibrationError("calibration points are degenerate (collinear or repeated)")
         errors = np.linalg.norm(_apply(homography, src) - dst, axis=1)
-        residual = float(np.sqrt(np.mean(errors**2)))
-        if residual > max_residual_mm:
-            worst = int(np.argmax(errors))
-            raise CalibrationError(
-                f"calibration residual {residual:.3f} mm exceeds the limit of "
-                f"{max_residual_mm:.3f} mm (worst: point {worst}, {errors[worst]:.3f} mm off)"
-            )
+        residual, problem = residual_check(errors, max_residual_mm, "calibration")
+        if problem:
+            raise CalibrationError(problem)
         return cls(homography, residual, float(errors.max()), len(src))
 
     def to_deck(self, pixels: np.ndarray) -> np.ndarray:
@@ -114,3 +111,30 @@ def _collinear(points: np.ndarray) -> bool:
 
 def _apply(homography: np.ndarray, points: np.ndarray) -> np.ndarray:
     return cv2.perspectiveTransform(points.reshape(-1, 1, 2), homography).reshape(-1, 2)
+
+
+def stored_deck_calibration(config, store):
+    """The stored deck calibration a run uses, or None (then the homography of the config).
+
+    ``calibration.use_stored`` on and a stored ``deck`` calibration named
+    ``calibration.deck.name``: it is used if its residual is within
+    ``calibration.max_residual_mm``, else refused.
+    """
+    if not config.calibration.use_stored:
+        return None
+    from labauto.store.calibrations import load_calibration
+    from labauto.vision.deck import DeckCalibration
+
+    name = config.calibration.deck.name
+    stored = load_calibration(store.engine, name, "deck")
+    if stored is None:
+        return None
+    deck = DeckCalibration.from_dict(stored.data)
+    limit = config.calibration.max_residual_mm
+    if deck.residual_mm > limit:
+        raise CalibrationError(
+            f"stored deck calibration {name!r} (id {stored.id}) has a residual of "
+            f"{deck.residual_mm:.3f} mm, over the limit of {limit:.3f} mm: calibrate the deck "
+            "again (labauto calibrate deck) or set calibration.use_stored: false"
+        )
+    return deck

@@ -41,7 +41,7 @@ from labauto.config import Config, plate_params
 from labauto.devices import Analyzer, Camera, Robot
 from labauto.drivers.errors import DeviceError, DeviceRefused
 from labauto.errors import RunError
-from labauto.orchestrator.calibration import Calibration
+from labauto.orchestrator.calibration import Calibration, stored_deck_calibration
 from labauto.orchestrator.control import EmergencyStop, RunControl, StopRequested
 from labauto.orchestrator.head_check import HeadCheck, HeadMiss, head_check_for
 from labauto.orchestrator.planning import PickRules, plan_picks
@@ -225,11 +225,14 @@ class ColonyPickingRun:
         final, error = RunState.SUCCEEDED, None
         try:
             self._preflight()
-            calibration = calibration_from_config(self.config)
+            calibration = stored_deck_calibration(self.config, self.store)
+            kind = "stored deck calibration (camera model)"
+            if calibration is None:
+                calibration, kind = calibration_from_config(self.config), "homography"
             self.event(
                 "calibration",
                 f"pixel-to-deck residual {calibration.residual_mm:.3f} mm "
-                f"over {calibration.n_points} points",
+                f"over {calibration.n_points} points ({kind})",
                 data=calibration.to_dict(),
             )
             self.head_check = head_check_for(self.config, self.workcell, calibration)

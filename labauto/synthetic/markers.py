@@ -187,8 +187,18 @@ def draw_marker(
         The true image position of the marker's centre.
     """
     n = _samples_per_turn(to_image, center, RING_OUTER * radius)
-    polys = [to_image(p) for p in marker_polygons(marker_id, center, radius, n)]
-    fill_polygons(image, polys, ink)
+    return _fill_plane(image, marker_polygons(marker_id, center, radius, n), to_image, ink, center)
+
+
+def _fill_plane(
+    image: np.ndarray,
+    polygons: Sequence[np.ndarray],
+    to_image: PlaneToImage,
+    color: float | Sequence[float],
+    center: Sequence[float],
+) -> tuple[float, float]:
+    """Fill plane polygons through ``to_image``; return the image of the plane point ``center``."""
+    fill_polygons(image, [to_image(p) for p in polygons], color)
     cx, cy = to_image(np.asarray([center], np.float64))[0]
     return float(cx), float(cy)
 
@@ -203,9 +213,7 @@ def draw_disc(
 ) -> tuple[float, float]:
     """Draw a filled circle of the plane (a circle-grid dot); returns its true image centre."""
     n = _samples_per_turn(to_image, center, radius)
-    fill_polygons(image, [to_image(disc_polygon(center, radius, n))], color)
-    cx, cy = to_image(np.asarray([center], np.float64))[0]
-    return float(cx), float(cy)
+    return _fill_plane(image, [disc_polygon(center, radius, n)], to_image, color, center)
 
 
 def draw_ring(
@@ -228,9 +236,7 @@ def draw_ring(
         )
         for t0 in (0.0, np.pi)
     ]
-    fill_polygons(image, [to_image(p) for p in halves], color)
-    cx, cy = to_image(np.asarray([center], np.float64))[0]
-    return float(cx), float(cy)
+    return _fill_plane(image, halves, to_image, color, center)
 
 
 def finish(

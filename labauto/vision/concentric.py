@@ -16,9 +16,9 @@ image of the centre is the eigenvector of ``C_2^-1 C_1`` of the eigenvalue that 
 
 With noisy ellipses the double eigenvalue splits a little; the one farthest from the other two
 is the single one. The conics are built in a frame centred on the first ellipse and scaled by
-its major semi-axis, which keeps the 3x3 problem well conditioned. With three circles every
-pair gives the centre; :func:`projected_center` averages the pairs with the largest radius ratio
-first (the best conditioned).
+its major semi-axis, which keeps the 3x3 problem well conditioned. :func:`projected_centers`
+solves many pairs at once (one batched eigenproblem); :func:`projected_center` averages, for
+three or more circles, the pairs of the first with each other one.
 """
 
 from __future__ import annotations
@@ -50,19 +50,6 @@ def conic_matrix(
     return conic / np.linalg.norm(conic)
 
 
-def _pair_center(inner: np.ndarray, outer: np.ndarray) -> np.ndarray | None:
-    try:
-        values, vectors = np.linalg.eig(np.linalg.solve(outer, inner))
-    except np.linalg.LinAlgError:
-        return None
-    gaps = [min(abs(values[i] - values[j]) for j in range(3) if j != i) for i in range(3)]
-    v = vectors[:, int(np.argmax(gaps))]
-    v = v.real if np.all(np.isfinite(v)) else None
-    if v is None or abs(v[2]) < 1e-12:
-        return None
-    return v[:2] / v[2]
-
-
 def projected_center(ellipses: Sequence[Ellipse]) -> tuple[float, float] | None:
     """Image of the common centre of concentric circles from their image ellipses.
 
@@ -74,22 +61,65 @@ def projected_center(ellipses: Sequence[Ellipse]) -> tuple[float, float] | None:
     Returns
     -------
     (x, y) or None
-        The projected centre, or None when the conics are degenerate.
+        The projected centre (the mean over the pairs of the first with each other one), or
+        None when the conics are degenerate.
     """
     if len(ellipses) < 2:
         raise ValueError(f"need at least 2 concentric ellipses, got {len(ellipses)}")
-    first = ellipses[0]
-    origin, scale = first.center, max(first.axes[0], 1e-9)
-    conics = [conic_matrix(e, origin, scale) for e in ellipses]
-    points = []
-    for j in range(len(conics) - 1, 0, -1):  # the widest pair first
-        p = _pair_center(conics[0], conics[j])
-        if p is not None:
-            points.append(p)
-    if not points:
+    rows = np.array([(*e.center, *e.axes, e.angle) for e in ellipses], np.float64)
+    centres = projected_centers(np.repeat(rows[:1], len(rows) - 1, axis=0), rows[1:])
+    centres = centres[np.isfinite(centres).all(axis=1)]
+    if len(centres) == 0:
         return None
-    mean = np.mean(points, axis=0) * scale + np.asarray(origin)
-    return float(mean[0]), float(mean[1])
+    x, y = centres.mean(axis=0)
+    return float(x), float(y)
+
+
+def conic_matrices(params: np.ndarray, origin: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """(K, 3, 3) unit-norm conics of ellipse rows ``(cx, cy, a, b, angle_deg)`` in the frames
+    ``(p - origin_k) / scale_k`` (as :func:`conic_matrix`, for K ellipses at once)."""
+    p = np.asarray(params, np.float64).reshape(-1, 5)
+    theta = np.deg2rad(p[:, 4])
+    c, s = np.cos(theta), np.sin(theta)
+    ia, ib = (scale / p[:, 2]) ** 2, (scale / p[:, 3]) ** 2
+    sxx, syy, sxy = c * c * ia + s * s * ib, s * s * ia + c * c * ib, c * s * (ia - ib)
+    u, v = (p[:, 0] - origin[:, 0]) / scale, (p[:, 1] - origin[:, 1]) / scale
+    conic = np.empty((len(p), 3, 3))
+    conic[:, 0, 0], conic[:, 1, 1], conic[:, 0, 1], conic[:, 1, 0] = sxx, syy, sxy, sxy
+    conic[:, 0, 2] = conic[:, 2, 0] = -(sxx * u + sxy * v)
+    conic[:, 1, 2] = conic[:, 2, 1] = -(sxy * u + syy * v)
+    conic[:, 2, 2] = sxx * u * u + 2 * sxy * u * v + syy * v * v - 1.0
+    return conic / np.linalg.norm(conic, axis=(1, 2))[:, None, None]
+
+
+def projected_centers(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """(K, 2) images of the centres of K pairs of concentric circles (NaN where degenerate).
+
+    Parameters
+    ----------
+    first, second : np.ndarray
+        (K, 5) ellipse rows ``(cx, cy, a, b, angle_deg)`` of each pair's two circles (either
+        order); the frame of each pair is centred on ``first`` and scaled by its major axis.
+    """
+    a = np.asarray(first, np.float64).reshape(-1, 5)
+    b = np.asarray(second, np.float64).reshape(-1, 5)
+    out = np.full((len(a), 2), np.nan)
+    if len(a) == 0:
+        return out
+    origin, scale = a[:, :2], np.maximum(a[:, 2], 1e-9)
+    c1, c2 = conic_matrices(a, origin, scale), conic_matrices(b, origin, scale)
+    ok = np.abs(np.linalg.det(c2)) > 1e-15
+    if not ok.any():
+        return out
+    values, vectors = np.linalg.eig(np.linalg.solve(c2[ok], c1[ok]))
+    gaps = np.abs(values[:, :, None] - values[:, None, :])
+    gaps[:, np.arange(3), np.arange(3)] = np.inf
+    single = np.argmax(gaps.min(axis=2), axis=1)
+    v = vectors[np.arange(len(single)), :, single].real
+    good = np.abs(v[:, 2]) > 1e-12
+    centre = np.where(good[:, None], v[:, :2] / np.where(good, v[:, 2], 1.0)[:, None], np.nan)
+    out[ok] = centre * scale[ok, None] + origin[ok]
+    return out
 
 
 def conic_to_ellipse(conic: np.ndarray) -> Ellipse | None:

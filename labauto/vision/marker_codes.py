@@ -32,14 +32,13 @@ length 14 that are
   near-full annulus or a lone tiny blob pair.
 
 That leaves 342 codes; ids are their index in the ascending order of each necklace's smallest
-rotation read as a 14-bit integer (bit 0 the least significant). The book is built once at import
-(16384 words, a few milliseconds).
+rotation read as a 14-bit integer (bit 0 the least significant). The book and the table of all
+16384 words are built once, on first use (about 30 ms; :func:`warm` does it ahead).
 """
 
 from __future__ import annotations
 
 import functools
-import itertools
 
 import numpy as np
 
@@ -67,28 +66,42 @@ def canonical(word: int) -> int:
     return min(rotate(word, k) for k in range(N_BITS))
 
 
-def _longest_run(word: int) -> int:
-    bits = [(word >> i) & 1 for i in range(N_BITS)] * 2
-    best = run = 1
-    for prev, cur in itertools.pairwise(bits):
-        run = run + 1 if cur == prev else 1
-        best = max(best, run)
-    return min(best, N_BITS)
+def _all_rotations() -> np.ndarray:
+    """(2**N_BITS, N_BITS) every word's rotations by 0..N_BITS-1 sectors."""
+    words = np.arange(1 << N_BITS, dtype=np.int64)[:, None]
+    k = np.arange(N_BITS, dtype=np.int64)[None, :]
+    return ((words << k) | (words >> ((N_BITS - k) % N_BITS))) & _MASK
 
 
-def _valid(word: int) -> bool:
-    weight = word.bit_count()
-    if weight % 2 or not MIN_WEIGHT <= weight <= MAX_WEIGHT:
-        return False
-    if len({rotate(word, k) for k in range(N_BITS)}) != N_BITS:
-        return False
-    return _longest_run(word) <= MAX_RUN
+def _longest_runs(words: np.ndarray) -> np.ndarray:
+    """Longest cyclic run of equal bits of each word."""
+    bits = (words[:, None] >> np.arange(N_BITS)) & 1
+    doubled = np.concatenate((bits, bits), axis=1)
+    best = np.ones(len(words), np.int64)
+    run = np.ones(len(words), np.int64)
+    for i in range(1, 2 * N_BITS):
+        run = np.where(doubled[:, i] == doubled[:, i - 1], run + 1, 1)
+        best = np.maximum(best, run)
+    return np.minimum(best, N_BITS)
 
 
 @functools.cache
 def code_book() -> tuple[int, ...]:
     """All codes, ``code_book()[id]`` being the canonical word of marker ``id``."""
-    return tuple(sorted({canonical(w) for w in range(1 << N_BITS) if _valid(w)}))
+    rotations = _all_rotations()
+    words = rotations[:, 0]
+    weight = ((words[:, None] >> np.arange(N_BITS)) & 1).sum(axis=1)
+    canonical_word = rotations.min(axis=1)
+    aperiodic = ~(rotations[:, 1:] == words[:, None]).any(axis=1)
+    valid = (
+        (weight % 2 == 0)
+        & (weight >= MIN_WEIGHT)
+        & (weight <= MAX_WEIGHT)
+        & aperiodic
+        & (_longest_runs(words) <= MAX_RUN)
+        & (canonical_word == words)
+    )
+    return tuple(int(w) for w in words[valid])
 
 
 def n_codes() -> int:
@@ -122,6 +135,11 @@ def _word_table() -> tuple[np.ndarray, np.ndarray]:
             read = rotate(word, -k)
             ids[read], turns[read] = marker_id, k
     return ids, turns
+
+
+def warm() -> None:
+    """Build the code book and the decoding table now (they are cached)."""
+    _word_table()
 
 
 def decode_words(words: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

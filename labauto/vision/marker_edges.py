@@ -29,7 +29,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from labauto.vision.concentric import projected_center
+from labauto.vision.concentric import projected_centers
 from labauto.vision.ellipse import Ellipse
 from labauto.vision.ellipse_fit import fit_ellipses_geometric_batch
 from labauto.vision.marker_codes import N_BITS, RING_INNER, RING_OUTER
@@ -42,6 +42,8 @@ WINDOW_PX = 3.0
 STEP_PX = 0.2
 #: A ray is used when the ends of its profile differ by at least this share of the contrast.
 MIN_STEP_SHARE = 0.5
+#: A pass whose edges lay this close (mean, px) to its windows' centres is the last one.
+CENTRED_PX = 0.08
 #: A circle's fit is used with at least this many points and at most this rms (px).
 MIN_POINTS = 12
 MAX_RMS = 0.3
@@ -102,7 +104,7 @@ def refine_circles(
         Each pass after the first measures along rays laid out from the previous fits, so that
         every window is centred on its edge (its truncation cancels) and, under strong
         perspective, the ring's rays follow the ring's own ellipse rather than the scaled centre
-        circle. A marker is measured again until its centre (:func:`marker_center`) moves less
+        circle. A marker is measured again until its centre (:func:`marker_centers`) moves less
         than ``tol_px`` (three passes for a small marker, up to five or six for one seen with
         strong perspective), at most ``max_passes`` times.
 
@@ -139,33 +141,43 @@ def refine_circles(
         centres, maps = affine_frames(frames)
         live = active[owner]
         index = (owner * 3 + which)[live]
-        edge, usable = _measure(
+        edge, usable, offset = _measure(
             grey, centres[index], maps[index], direction[live], half[live], min_contrast
         )
         fits = _fit_sets(guess, edge, owner[live], which[live], usable)
-        for m in np.flatnonzero(active).tolist():
-            centre = marker_center(fits[m])
-            before = marker_center(result[m])
+        todo = np.flatnonzero(active)
+        now = marker_centers([fits[m] for m in todo])
+        before = marker_centers([result[m] for m in todo])
+        moved = np.hypot(*(now - before).T)
+        centred = _windows_centred(offset, usable, owner[live] * 3 + which[live], len(guess))
+        for m, centre, shift in zip(todo.tolist(), now, moved, strict=True):
             result[m] = fits[m]
             guess[m] = tuple(
                 f if f is not None else g for f, g in zip(fits[m], guess[m], strict=True)
             )
-            active[m] = centre is not None and (
-                before is None or np.hypot(centre[0] - before[0], centre[1] - before[1]) > tol_px
-            )
+            # done when the windows sat on their edges (another pass would measure the same)
+            # or the centre stopped moving; NaN: no centre yet, nothing more to gain
+            active[m] = bool(np.isfinite(centre).all()) and not centred[m] and not shift <= tol_px
         if not active.any():
             break
     return result
 
 
-def marker_center(circles: Circles) -> tuple[float, float] | None:
-    """The projected centre from the fits: the centre circle with the outer ring edge (radius
-    ratio 3, the best-conditioned pair), or with the inner edge when the outer one failed."""
-    centre, inner, outer = circles
-    ring = outer if outer is not None else inner
-    if centre is None or ring is None:
-        return None
-    return projected_center([centre, ring])
+def marker_centers(circles: list[Circles]) -> np.ndarray:
+    """(K, 2) projected centres from the fits (NaN where there is none): the centre circle
+    with the outer ring edge (radius ratio 3, the best-conditioned pair), or with the inner
+    edge when the outer one failed."""
+    rows = np.full((len(circles), 2, 5), np.nan)
+    for k, (centre, inner, outer) in enumerate(circles):
+        ring = outer if outer is not None else inner
+        if centre is not None and ring is not None:
+            rows[k, 0] = (*centre.center, *centre.axes, centre.angle)
+            rows[k, 1] = (*ring.center, *ring.axes, ring.angle)
+    out = np.full((len(circles), 2), np.nan)
+    have = np.isfinite(rows[:, 0, 0])
+    if have.any():
+        out[have] = projected_centers(rows[have, 0], rows[have, 1])
+    return out
 
 
 def _measure(
@@ -177,11 +189,20 @@ def _measure(
     min_contrast: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Edge point along every ray ``centre + s * direction`` near the ellipse ``(centre, map)``,
-    and whether it is usable."""
+    whether it is usable, and its offset (px) from the window's centre."""
     n_samples = round(2 * WINDOW_PX / STEP_PX)
     grid = ((np.arange(n_samples) + 0.5) / n_samples * 2.0 - 1.0).astype(np.float32)
     # expected crossing: |map^-1 (s0 direction)| = 1
-    local = np.linalg.solve(maps, direction[:, :, None])[:, :, 0]
+    det = maps[:, 0, 0] * maps[:, 1, 1] - maps[:, 0, 1] * maps[:, 1, 0]
+    local = (
+        np.column_stack(
+            (
+                maps[:, 1, 1] * direction[:, 0] - maps[:, 0, 1] * direction[:, 1],
+                maps[:, 0, 0] * direction[:, 1] - maps[:, 1, 0] * direction[:, 0],
+            )
+        )
+        / det[:, None]
+    )  # map^-1 direction (2x2 inverse written out)
     s0 = 1.0 / np.hypot(local[:, 0], local[:, 1])
     px_per_unit = np.hypot(direction[:, 0], direction[:, 1])
     along = (half / px_per_unit).astype(np.float32)[:, None] * grid[None, :] + s0.astype(
@@ -199,7 +220,19 @@ def _measure(
     edge_px = -half + ones * (2.0 * half / n_samples)
     usable &= np.abs(edge_px) < half
     edge = centres + (s0 + edge_px / px_per_unit)[:, None] * direction
-    return edge, usable
+    return edge, usable, edge_px
+
+
+def _windows_centred(
+    offset: np.ndarray, usable: np.ndarray, key: np.ndarray, n_markers: int
+) -> np.ndarray:
+    """(K,) bool: every circle of the marker had its edges within ``CENTRED_PX`` (mean
+    distance) of the windows' centres."""
+    k = key[usable]
+    count = np.bincount(k, minlength=3 * n_markers)
+    total = np.bincount(k, np.abs(offset[usable]), minlength=3 * n_markers)
+    mean = np.where(count > 0, total / np.maximum(count, 1), np.inf)
+    return (mean.reshape(n_markers, 3) <= CENTRED_PX).all(axis=1)
 
 
 def _fit_sets(

@@ -23,13 +23,20 @@ objects, we first segment obviously elliptical shapes from artifacts using our D
    the ink-paper contrast at least ``min_contrast`` and every bit at least ``min_margin`` from
    the threshold (in units of half the contrast): rectangles, plain dots and artefacts get no
    id.
-5. **Perspective-bias correction**: the edge points of the code ring that lie on its inner and
-   outer circles (radius within 0.25 centre radii, image gradient within 15 degrees of the
-   radial direction, which drops the sector ends) are fitted with one ellipse each; the
-   projected centre of the three concentric circles is the eigenvector construction of
-   :mod:`labauto.vision.concentric`. A ring fit with fewer than 24 points or an rms over 0.35 px
-   is not used; with no usable ring fit the centre is the centre-circle ellipse's centre and
-   ``bias_corrected`` is False.
+5. **Sub-pixel circles and perspective-bias correction**
+   (:mod:`labauto.vision.marker_edges`): the centre circle and the code ring's inner and outer
+   edges are measured again along rays (the moment of each edge profile), each fitted with the
+   geometric ellipse fit, and the image of the common centre of the centre circle and the
+   ring's outer edge (the best-conditioned pair; the inner edge stands in when the outer one
+   failed) is the eigenvector construction of :mod:`labauto.vision.concentric`, exact under
+   any homography. With no usable ring fit, or a correction larger than any perspective makes
+   (``MAX_BIAS_SHARE`` of the semi-minor axis plus ``MAX_BIAS_PX``), the centre is the centre
+   circle's ellipse centre and ``bias_corrected`` is False. ``ellipse`` is the re-measured
+   centre circle.
+
+Markers must be seen from their printed side: a mirrored marker (seen through a transparent
+sheet, or drawn by a map that flips orientation) reads its ring backwards, which is in general
+the word of another valid code, so it gets a wrong id.
 
 ``score`` is the smallest bit margin (0..1) times the contrast share (contrast / 255, capped at
 1 after doubling): 1 is a perfect read.
@@ -52,12 +59,18 @@ from labauto.vision.ellipse import Ellipse
 from labauto.vision.ellipse_fit import fit_selected_ellipses
 from labauto.vision.gradient import as_uint8_image
 from labauto.vision.marker_codes import N_BITS, RING_OUTER, decode_words
-from labauto.vision.marker_edges import affine_frames, marker_center, refine_circles
+from labauto.vision.marker_codes import warm as warm_codes
+from labauto.vision.marker_edges import affine_frames, marker_centers, refine_circles
 from labauto.vision.shape_angle import shape_angles
 
 #: Samples per sector along the ring, and the ring radii sampled (centre radii).
 SAMPLES_PER_BIT = 8
 READ_RADII = (2.3, 2.5, 2.7)
+#: Largest believable perspective bias: a corrected centre farther than this from the centre
+#: circle's ellipse centre (share of its semi-minor axis, plus px) is dropped (the bias of a
+#: 20 px marker at 60 degrees seen with strong perspective is 0.05 semi-minor axes).
+MAX_BIAS_SHARE = 0.2
+MAX_BIAS_PX = 0.3
 #: Radii (centre radii) sampled for the ink level and the paper level.
 INK_RADII = (0.0, 0.35, 0.6)
 PAPER_RADII = (1.5, 3.35)
@@ -221,6 +234,7 @@ def detect_markers(image: np.ndarray, **options: object) -> list[Marker]:
 
 def find_markers(image: np.ndarray, params: MarkerParams = MarkerParams()) -> MarkerResult:
     """:func:`detect_markers` with its parameters as one value, and the timing."""
+    warm_codes()  # the one-off code table is not part of an image's time
     start = time.perf_counter()
     img = as_uint8_image(image)
     grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
@@ -337,9 +351,18 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
         else [(None, None, None)] * len(picked)
     )
     out = []
-    for (marker_id, j), (centre_fit, inner, outer) in zip(chosen, circles, strict=True):
+    centres = marker_centers(circles)
+    for (marker_id, j), (centre_fit, inner, outer), xy in zip(
+        chosen, circles, centres, strict=True
+    ):
         e = centre_fit if centre_fit is not None else ellipses[j]
-        centre = marker_center((centre_fit, inner, outer))
+        centre = (float(xy[0]), float(xy[1])) if np.isfinite(xy).all() else None
+        if (
+            centre is not None
+            and np.hypot(centre[0] - e.center[0], centre[1] - e.center[1])
+            > MAX_BIAS_SHARE * e.axes[1] + MAX_BIAS_PX
+        ):
+            centre = None  # a bias that large is a failed ring fit, not perspective
         ring = tuple(r for r in (inner, outer) if r is not None)
         cx, cy = angles.centroid[keep[j]]
         out.append(
