@@ -377,21 +377,22 @@ class HeadCheckConfig(Section):
     """The camera watching the picking head (:mod:`labauto.orchestrator.head_check`)."""
 
     enabled: bool = False
-    #: Id of the coded marker on the head.
-    marker_id: Annotated[int, Field(ge=0)] = 0
+    #: Id of the coded marker on the head; ``null``: ``calibration.deck.head_marker.id``.
+    marker_id: Annotated[int, Field(ge=0)] | None = None
     #: Largest distance (mm) between the seen and the commanded head position.
     tolerance_mm: Positive = 0.5
     #: ``simulated``: rendered where the simulated gantry really is (needs ``robot.simulate``);
     #: ``camera``: the camera driver's ``capture()``.
     camera: Literal["simulated", "camera"] = "simulated"
-    #: Centre-circle radius of the head's marker (mm), for the simulated camera.
-    marker_radius_mm: Positive = 1.0
+    #: Centre-circle radius (mm) of the marker the simulated camera draws with the config's
+    #: homography; ``null``: ``calibration.deck.head_marker.radius_mm``.
+    marker_radius_mm: Positive | None = None
 
     @model_validator(mode="after")
     def _known_marker(self) -> HeadCheckConfig:
         from labauto.vision.marker_codes import n_codes
 
-        if self.marker_id >= n_codes():
+        if self.marker_id is not None and self.marker_id >= n_codes():
             raise ValueError(f"marker_id: {self.marker_id} is no marker id (0-{n_codes() - 1})")
         return self
 

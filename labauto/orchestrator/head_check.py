@@ -20,13 +20,18 @@ Small Protocols keep the check independent of the parts it uses:
     ``locate(image) -> (x, y) pixel or None``: where the head is in an image
     (:class:`MarkerHeadLocator`: the coded marker with the configured id, its fitted centre).
 ``DeckMap``
-    ``to_deck(pixels) -> deck mm``: the run's calibration
-    (:class:`labauto.orchestrator.calibration.Calibration`, or a camera calibration).
+    ``to_deck(pixels) -> deck mm``: the run's calibration, the config's homography
+    (:class:`labauto.orchestrator.calibration.Calibration`) or a stored deck calibration
+    (:class:`labauto.vision.deck.DeckCalibration`, a camera model).
 
-The head's marker is at the head's own height while the calibration maps the deck plane; in
-the simulated workcell both are the same plane; on a real one the tolerance has to allow for
-the parallax, or the deck calibration is made from the head's marker (issue 14's automatic deck
-calibration does that).
+The head's marker is at the head's own height (safe height plus the marker's offset) while a
+homography maps one plane; with a camera model the marker's pixel is cast onto the plane at the
+marker's height (``to_deck(pixels, z=...)``), so there is no parallax; with the homography the
+tolerance has to allow for it (in the simulated workcell the homography's plane is the one the
+marker is drawn in). The marker's horizontal offset from the head is taken off the seen position.
+
+The head's marker is ``calibration.deck.head_marker`` (the one the automatic deck calibration
+uses) unless ``head_check.marker_id`` names another.
 """
 
 from __future__ import annotations
@@ -69,7 +74,7 @@ class HeadLocator(Protocol):
 
 
 class DeckMap(Protocol):
-    """Pixel to deck millimetres."""
+    """Pixel to deck millimetres (a camera model also takes the height ``z`` to map onto)."""
 
     def to_deck(self, pixels: np.ndarray) -> np.ndarray: ...
 
@@ -166,10 +171,22 @@ class HeadCheck:
         Maps that pixel to the deck.
     tolerance_mm : float
         Largest distance accepted (> 0).
+    height_mm : float, optional
+        The marker's height during a check, for a deck map that is a camera model
+        (``to_deck(pixels, z=height_mm)``); ``None`` for a homography.
+    offset_mm : (dx, dy)
+        The marker's horizontal offset from the head.
     """
 
     def __init__(
-        self, camera: HeadCamera, locator: HeadLocator, deck_map: DeckMap, tolerance_mm: float
+        self,
+        camera: HeadCamera,
+        locator: HeadLocator,
+        deck_map: DeckMap,
+        tolerance_mm: float,
+        *,
+        height_mm: float | None = None,
+        offset_mm: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         if not (math.isfinite(tolerance_mm) and tolerance_mm > 0):
             raise ValueError(f"tolerance_mm must be a finite number > 0, got {tolerance_mm!r}")
@@ -177,6 +194,8 @@ class HeadCheck:
         self.locator = locator
         self.deck_map = deck_map
         self.tolerance_mm = float(tolerance_mm)
+        self.height_mm = height_mm
+        self.offset_mm = (float(offset_mm[0]), float(offset_mm[1]))
 
     def check(self, x_mm: float, y_mm: float) -> HeadCheckResult:
         """Take an image and compare the head's position with ``(x_mm, y_mm)``."""
@@ -184,8 +203,12 @@ class HeadCheck:
         pixel = self.locator.locate(self.camera.capture())
         if pixel is None:
             return HeadCheckResult(commanded, None, None, None, self.tolerance_mm)
-        seen = self.deck_map.to_deck(np.asarray([pixel], np.float64))[0]
-        seen_mm = (float(seen[0]), float(seen[1]))
+        pixels = np.asarray([pixel], np.float64)
+        if self.height_mm is None:
+            seen = self.deck_map.to_deck(pixels)[0]
+        else:
+            seen = self.deck_map.to_deck(pixels, z=self.height_mm)[0]  # type: ignore[call-arg]
+        seen_mm = (float(seen[0]) - self.offset_mm[0], float(seen[1]) - self.offset_mm[1])
         error = math.hypot(seen_mm[0] - commanded[0], seen_mm[1] - commanded[1])
         return HeadCheckResult(commanded, seen_mm, pixel, error, self.tolerance_mm)
 
@@ -203,31 +226,34 @@ def head_check_for(config: Any, workcell: Any, calibration: Any) -> HeadCheck | 
     """The head check a run's config asks for (``None`` when ``head_check.enabled`` is off).
 
     ``head_check.camera: simulated`` renders the head's marker where the simulated gantry of
-    ``workcell.robot.simulator`` really is, through ``calibration`` (a pixel-to-deck
-    homography); ``camera`` uses the workcell camera's ``capture()``.
+    ``workcell.robot.simulator`` really is: through the inverse of ``calibration``'s homography
+    (:class:`~labauto.synthetic.head_camera.SimulatedHeadCamera`), or, when the run uses a
+    stored deck calibration (a camera model), with the simulated deck camera of
+    ``calibration.deck.simulated_camera`` that the deck calibration itself uses. ``camera``
+    uses the workcell camera's ``capture()``.
 
     Raises
     ------
     RunError
-        The camera asked for cannot take images.
+        The camera asked for cannot take images, or a simulated camera model would render
+        another marker than ``head_check.marker_id``.
     """
     section = config.head_check
     if not section.enabled:
         return None
+    head = config.calibration.deck.head_marker
+    marker_id = head.id if section.marker_id is None else section.marker_id
+    radius = head.radius_mm if section.marker_radius_mm is None else section.marker_radius_mm
+    dx, dy, dz = head.offset_mm
+    homography = getattr(calibration, "homography", None)
+    height = None if homography is not None else config.robot.safe_z_mm + dz
     if section.camera == "simulated":
-        from labauto.synthetic.head_camera import SimulatedHeadCamera, deck_to_image
-
         gantry = getattr(workcell.robot, "simulator", None)
         if gantry is None:
             raise RunError(
                 "head_check.camera: 'simulated' needs a simulated robot (robot.simulate)"
             )
-        camera: HeadCamera = SimulatedHeadCamera(
-            lambda: gantry.position,
-            deck_to_image(calibration.homography),
-            section.marker_id,
-            section.marker_radius_mm,
-        )
+        camera = _simulated_camera(config, gantry, homography, marker_id, radius)
     else:
         camera = workcell.camera
         if not isinstance(camera, HeadCamera):
@@ -236,5 +262,39 @@ def head_check_for(config: Any, workcell: Any, calibration: Any) -> HeadCheck | 
                 "image on demand (it has no capture())"
             )
     return HeadCheck(
-        camera, MarkerHeadLocator(section.marker_id), calibration, section.tolerance_mm
+        camera,
+        MarkerHeadLocator(marker_id),
+        calibration,
+        section.tolerance_mm,
+        height_mm=height,
+        offset_mm=(dx, dy),
     )
+
+
+def _simulated_camera(
+    config: Any, gantry: Any, homography: np.ndarray | None, marker_id: int, radius: float
+) -> HeadCamera:
+    """The simulated camera that sees the head (see :func:`head_check_for`)."""
+    head = config.calibration.deck.head_marker
+    if homography is None:  # a camera model: the deck calibration's own simulated camera
+        from labauto import deck_calibration
+
+        # issue 14's simulated deck camera (asked to be public as simulated_deck_camera)
+        simulated_deck_camera = getattr(
+            deck_calibration, "simulated_deck_camera", deck_calibration._simulated_camera
+        )
+        if marker_id != head.id:
+            raise RunError(
+                f"head_check.marker_id: {marker_id} is not the simulated deck camera's head "
+                f"marker (calibration.deck.head_marker.id {head.id})"
+            )
+        return simulated_deck_camera(config, lambda: gantry.position)
+    from labauto.synthetic.head_camera import SimulatedHeadCamera, deck_to_image
+
+    dx, dy, _dz = head.offset_mm
+
+    def marker_position() -> tuple[float, float]:
+        x, y, _z = gantry.position
+        return (x + dx, y + dy)
+
+    return SimulatedHeadCamera(marker_position, deck_to_image(homography), marker_id, radius)

@@ -98,3 +98,44 @@ def test_a_simulated_head_camera_needs_a_simulated_robot(make_config):
     with open_run(config, store) as session:
         outcome = session.execute()
     assert outcome.state == "failed" and "needs a simulated robot" in outcome.error
+
+
+def test_with_a_stored_deck_calibration_the_camera_model_sees_the_head_without_parallax(
+    make_config,
+):
+    """A run on issue 14's camera-model deck calibration: its simulated camera over the deck,
+    the head marker of ``calibration.deck.head_marker``, the pixel cast onto safe height."""
+    from labauto.store.calibrations import save_calibration
+    from labauto.synthetic.camera import CameraModel
+    from labauto.vision.deck import DeckCalibration
+
+    config = make_config(
+        head_check={"enabled": True, "tolerance_mm": 0.5}, picking={"max_picks": 2}
+    )
+    sim = config.calibration.deck.simulated_camera
+    model = CameraModel.looking_down(
+        np.array(sim.camera_matrix), np.array(sim.dist_coeffs), sim.position_mm,
+        sim.image_size, sim.tilt_deg,
+    )  # fmt: skip
+    truth = DeckCalibration(
+        model.camera_matrix, model.dist_coeffs, model.rvec, model.tvec,
+        config.robot.pick_z_mm, 0.0, 0.0, 12, model.image_size,
+    )  # fmt: skip
+    store = Store.open(config.database.url)
+    save_calibration(store.engine, "deck", "deck", truth.to_dict(), 0.0)
+    recorder = Recorder()
+    gantry_box = {}
+    recorder.when(
+        lambda kind, message: kind == "pick.done",
+        lambda: gantry_box["gantry"].inject("lost_steps", axis="y", mm=1.0),
+    )
+    with open_run(config, store, reporter=recorder) as session:
+        gantry_box["gantry"] = session.runner.workcell.robot.simulator
+        outcome = session.execute()
+    (calibration,) = store.events(outcome.run_id, "calibration")
+    assert "stored deck calibration" in calibration.message
+    checks = store.events(outcome.run_id, "head.checked")
+    assert len(checks) == 2 and all(e.data["error_mm"] < 0.05 for e in checks), checks
+    (miss,) = store.events(outcome.run_id, "head.miss")
+    assert miss.data["error_mm"] == pytest.approx(1.0, abs=0.05)
+    assert outcome.state == "failed" and "HeadMiss" in outcome.error
