@@ -10,7 +10,9 @@ Rigid set (``--board FILE.yaml``), any of:
 Camera (``--calibration FILE``): ``camera_matrix`` (3x3) and ``dist_coeffs`` from an OpenCV
 FileStorage file (YAML or XML, as ``labauto calibrate camera`` exports it; also
 ``distortion_coefficients``, OpenCV's sample name) or from the JSON of
-``labauto calibrate camera --json``.
+``labauto calibrate camera --json``. For two-camera triangulation (``--stereo``) each file also
+gives the camera's pose in the common world frame: ``rvec`` (Rodrigues) and ``tvec`` (mm),
+world to camera.
 """
 
 from __future__ import annotations
@@ -25,8 +27,9 @@ import numpy as np
 
 from labauto.errors import LabautoError
 from labauto.safeyaml import YamlRefused, read_yaml_file
+from labauto.vision.pose import CameraView
 
-__all__ = ["CameraIntrinsics", "InputError", "read_camera", "read_rigid_set"]
+__all__ = ["CameraIntrinsics", "InputError", "read_camera", "read_camera_view", "read_rigid_set"]
 
 CameraIntrinsics = tuple[np.ndarray, np.ndarray]
 
@@ -77,7 +80,38 @@ def read_rigid_set(path: str | Path) -> dict[int, tuple[float, float, float]]:
 
 def read_camera(path: str | Path) -> CameraIntrinsics:
     """``(camera_matrix, dist_coeffs)`` from a calibration file (module docstring)."""
-    path = Path(path)
+    fields = _read_fields(Path(path), ("camera_matrix", "dist_coeffs"))
+    try:
+        k = np.asarray(fields["camera_matrix"], np.float64).reshape(3, 3)
+        d = np.asarray(
+            fields["dist_coeffs"] if fields["dist_coeffs"] is not None else [], np.float64
+        )
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: expected camera_matrix (3x3) and dist_coeffs") from None
+    d = d.ravel()
+    if not (np.all(np.isfinite(k)) and np.all(np.isfinite(d))) or k[0, 0] <= 0 or k[1, 1] <= 0:
+        raise InputError(f"{path}: camera_matrix must be finite with positive focal lengths")
+    return k, d
+
+
+def read_camera_view(path: str | Path) -> CameraView:
+    """A calibrated camera with its pose in the world frame (``rvec``, ``tvec``)."""
+    k, d = read_camera(path)
+    fields = _read_fields(Path(path), ("rvec", "tvec"))
+    try:
+        rvec = np.asarray(fields["rvec"], np.float64).reshape(3)
+        tvec = np.asarray(fields["tvec"], np.float64).reshape(3)
+    except (TypeError, ValueError):
+        raise InputError(
+            f"{path}: --stereo needs the camera's pose: rvec and tvec (3 numbers each)"
+        ) from None
+    if not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
+        raise InputError(f"{path}: rvec and tvec must be finite")
+    return CameraView(k, d, rvec, tvec)
+
+
+def _read_fields(path: Path, names: tuple[str, ...]) -> dict[str, Any]:
+    """The named matrices of a calibration file, ``None`` where absent."""
     if not path.is_file():
         raise InputError(f"{path}: calibration file not found")
     if path.suffix.lower() == ".json":
@@ -85,24 +119,17 @@ def read_camera(path: str | Path) -> CameraIntrinsics:
             data: dict[str, Any] = json.loads(path.read_text())
         except (OSError, ValueError) as exc:
             raise InputError(f"{path}: cannot read the calibration JSON ({exc})") from None
-        matrix, dist = data.get("camera_matrix"), data.get("dist_coeffs")
-    else:
-        try:
-            storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-        except cv2.error:
-            raise InputError(f"{path}: not an OpenCV FileStorage file") from None
-        try:
-            matrix = storage.getNode("camera_matrix").mat()
-            dist = storage.getNode("dist_coeffs").mat()
-            if dist is None:
-                dist = storage.getNode("distortion_coefficients").mat()
-        finally:
-            storage.release()
+        if not isinstance(data, dict):
+            raise InputError(f"{path}: expected a JSON object")
+        return {name: data.get(name) for name in names}
     try:
-        k = np.asarray(matrix, np.float64).reshape(3, 3)
-        d = np.asarray(dist if dist is not None else [], np.float64).ravel()
-    except (TypeError, ValueError):
-        raise InputError(f"{path}: expected camera_matrix (3x3) and dist_coeffs") from None
-    if not (np.all(np.isfinite(k)) and np.all(np.isfinite(d))) or k[0, 0] <= 0 or k[1, 1] <= 0:
-        raise InputError(f"{path}: camera_matrix must be finite with positive focal lengths")
-    return k, d
+        storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except cv2.error:
+        raise InputError(f"{path}: not an OpenCV FileStorage file") from None
+    try:
+        out = {name: storage.getNode(name).mat() for name in names}
+        if "dist_coeffs" in out and out["dist_coeffs"] is None:
+            out["dist_coeffs"] = storage.getNode("distortion_coefficients").mat()
+        return out
+    finally:
+        storage.release()

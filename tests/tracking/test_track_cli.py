@@ -158,3 +158,60 @@ def test_a_camera_that_fails_and_an_unknown_camera(capsys):
         next(frames)
     code, _, err = track(capsys, "camera:nosuch")
     assert code == 1 and "no camera driver named 'nosuch'" in err
+
+
+def test_two_cameras_give_triangulated_3d_positions(tmp_path, hard_spec, capsys):
+    from test_pose import render_view
+
+    from labauto.vision.pose import CameraView
+
+    points = board_points(hard_spec)  # a board lying still: it is the world frame
+    k = np.array([[900.0, 0, 399.5], [0, 900, 299.5], [0, 0, 1]])
+    dist = np.array([-0.05, 0.01, 0, 0, 0])
+    views = {
+        "left": CameraView(k, dist, np.array([0.25, -0.2, 0.02]), np.array([-60.0, 0.0, 480.0])),
+        "right": CameraView(k, dist, np.array([0.2, 0.25, -0.03]), np.array([60.0, 10.0, 470.0])),
+    }
+    args = []
+    for name, view in views.items():
+        folder = tmp_path / name
+        folder.mkdir()
+        for n in range(3):
+            cv2.imwrite(str(folder / f"{n}.png"), render_view(points, view))
+        calibration = tmp_path / f"{name}.json"
+        calibration.write_text(
+            json.dumps(
+                {
+                    "camera_matrix": k.tolist(),
+                    "dist_coeffs": dist.tolist(),
+                    "rvec": view.rvec.tolist(),
+                    "tvec": view.tvec.tolist(),
+                }
+            )
+        )
+        args.append((folder, calibration))
+    (left, cal_left), (right, cal_right) = args
+    code, lines, err = track(
+        capsys, left, "--stereo", right, "--calibration", cal_left, "--calibration2", cal_right,
+        "--fit", "--json-lines",
+    )  # fmt: skip
+    assert code == 0, err
+    assert len(lines) == 3
+    for document in lines:
+        found = {p["id"]: p for p in document["points_3d"]}
+        assert set(found) == set(points)
+        for mid, point in found.items():
+            assert np.linalg.norm(np.subtract(point["position_mm"], points[mid])) < 0.5
+            assert max(point["reprojection_px"]) < 0.5
+    # a calibration without the camera's pose is refused in one line
+    code, _, err = track(
+        capsys, left, "--stereo", right, "--calibration", tmp_path / "nope.json",
+        "--calibration2", cal_right,
+    )  # fmt: skip
+    assert code == 1 and "calibration file not found" in err
+    (tmp_path / "nopose.json").write_text(json.dumps({"camera_matrix": k.tolist()}))
+    code, _, err = track(
+        capsys, left, "--stereo", right, "--calibration", tmp_path / "nopose.json",
+        "--calibration2", cal_right,
+    )  # fmt: skip
+    assert code == 1 and "needs the camera's pose: rvec and tvec" in err
