@@ -155,3 +155,9 @@ def test_the_mosaic_maps_detections_back_exactly():
         tile = mosaic.owner_of(blob.centroid)
         assert tile is not None
         assert mosaic.to_frame(tile, blob.centroid) == pytest.approx(direct[blob.id], abs=1e-9)
+
+
+def test_the_tracker_is_labauto_public_api():
+    import labauto
+
+    assert labauto.MarkerTracker is MarkerTracker and "MarkerTracker" in labauto.__all__
