@@ -17,6 +17,10 @@ are identified by their place in the run (the camera's order), never by their pi
 run finds plate 2 as plate 2 even if it looks exactly like plate 1 (a repeated frame, which is
 reported as a warning). So nothing is picked twice and nothing stored is lost.
 
+With ``head_check`` on, the camera confirms the head's position over each pick before the tool
+descends and after the probe (:mod:`labauto.orchestrator.head_check`); a miss fails the pick
+(``head.miss``), nothing moves again, and the run fails.
+
 The outcome is honest: ``succeeded`` only when every planned pick was analysed,
 ``completed_with_errors`` when the run got through its plates but some picks failed or have an
 unknown outcome, ``failed`` when it could not go on (resumable with ``--resume ID``). A device
@@ -476,7 +480,12 @@ class ColonyPickingRun:
             missed = exc
             self.exchanges.flush()
             self.store.set_pick_state(pick.id, PickState.FAILED, error=str(exc))
-            self.event("head.miss", str(exc), source="camera", data=exc.result.to_dict())
+            self.event(
+                "head.miss",
+                str(exc),
+                source="camera",
+                data={"pick_id": pick.id, **exc.result.to_dict()},
+            )
         except DeviceError as exc:
             if self.control.estopped:
                 raise EmergencyStop("emergency stop") from exc
