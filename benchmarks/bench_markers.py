@@ -26,6 +26,7 @@ Run: ``python benchmarks/bench_markers.py [--scenes 50] [--repeats 5]``.
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import time
 
@@ -123,6 +124,29 @@ def speed(repeats: int, n_scenes: int) -> dict:
     return {"times": times, "counts": counts, "aruco_truth": aruco_truth}
 
 
+def stage_times(image: np.ndarray) -> list[float]:
+    """ms of: contours, DES prefilter + first fits, code read, circles + bias correction."""
+    from labauto.vision import markers as mk
+    from labauto.vision.detector import extract_contours
+
+    params = mk.MarkerParams()
+    t = [time.perf_counter()]
+    contours = extract_contours(image, params.detector_params())
+    t.append(time.perf_counter())
+    _angles, fits, keep = mk._candidates(image, contours, params)
+    t.append(time.perf_counter())
+    pixels = image.astype(np.float32)
+    ellipses = [fits[k] for k in keep]
+    ids, _score, _bit0, bits, start = mk._read_codes(pixels, ellipses, params)
+    t.append(time.perf_counter())
+    good = [j for j in range(len(ellipses)) if ids[j] >= 0]
+    circles = mk.refine_circles(pixels, [ellipses[j] for j in good], [bits[j] for j in good],
+                                [float(start[j]) for j in good], params.min_contrast)  # fmt: skip
+    mk.marker_centers(circles)
+    t.append(time.perf_counter())
+    return [(b - a) * 1e3 for a, b in itertools.pairwise(t)]
+
+
 def _row(name: str, acc: dict) -> str:
     def stat(e: np.ndarray) -> str:
         return f"{e.mean():.4f} / {np.percentile(e, 95):.4f} / {e.max():.4f}"
@@ -159,6 +183,13 @@ def main() -> None:
         t = np.array(times)
         n = int(np.median(result["counts"][name]))
         print(f"| {name} | {np.median(t):.1f} | {np.percentile(t, 90):.1f} | {n} of 40 |")
+    image = marker_scene(np.random.default_rng(2000))[0]
+    stages = np.median([stage_times(image) for _ in range(args.repeats * 2)], axis=0)
+    names = ("contours (gradient, Canny, linking, sub-pixel)", "DES prefilter + first fits",
+             "code read", "circles re-measured + bias correction")  # fmt: skip
+    print()
+    print("Stages of detect_markers, median ms: " + "; ".join(
+        f"{n} {v:.1f}" for n, v in zip(names, stages, strict=True)))  # fmt: skip
 
 
 if __name__ == "__main__":

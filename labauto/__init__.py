@@ -13,7 +13,7 @@ except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0"
 
 from labauto.api import analyze_plate, detect, detect_markers
-from labauto.calibrate import calibrate_camera
+from labauto.calibration.camera import calibrate_camera
 
 __all__ = ["__version__", "analyze_plate", "calibrate_camera", "detect", "detect_markers"]
 

@@ -49,12 +49,12 @@ def camera_cmd(
     config: Config,
 ) -> None:
     """Intrinsics and distortion from IMAGES of a calibration board."""
-    from labauto.calibrate import calibrate_camera
+    from labauto.calibration.camera import calibrate_camera
 
     result = calibrate_camera(board_path, list(images))
     doc = result.to_dict()
     if out:
-        from labauto.calibration_files import write_opencv_yaml
+        from labauto.calibration.files import write_opencv_yaml
 
         write_opencv_yaml(out, doc)
     if save_as:
@@ -83,7 +83,7 @@ def camera_cmd(
 @config_option
 def export_cmd(name: str, out: str, config: Config) -> None:
     """Write the stored calibration NAME as OpenCV FileStorage YAML."""
-    from labauto.calibration_files import write_opencv_yaml
+    from labauto.calibration.files import write_opencv_yaml
     from labauto.errors import CalibrationError
     from labauto.store.calibrations import load_calibration
 
@@ -118,7 +118,7 @@ def list_cmd(config: Config) -> None:
 @config_option
 def deck_cmd(as_json: bool, no_save: bool, config: Config) -> None:
     """The camera's pose over the deck and the pixel-to-deck map (calibration.deck)."""
-    from labauto.deck_calibration import calibrate_deck
+    from labauto.calibration.deck import calibrate_deck
     from labauto.store.calibrations import save_calibration
 
     with _store(config) as store:
@@ -155,7 +155,7 @@ def simulate_views_cmd(board_path: str, out: str, views: int, seed: int, config:
 
     import numpy as np
 
-    from labauto.board_files import read_board
+    from labauto.calibration.boards_io import read_board
     from labauto.imageio import write_image
     from labauto.synthetic.board_views import board_poses, render_board_view
 

@@ -31,7 +31,7 @@ def board_cmd(
     rows: int, cols: int, pitch_mm: float, first_id: int, dpi: float, polarity: str, out: str
 ) -> None:
     """Write a printable board of coded markers and, beside it, STEM.yaml describing it."""
-    from labauto.board_files import write_board
+    from labauto.calibration.boards_io import write_board
     from labauto.vision.boards import coded_board
 
     board = coded_board(rows, cols, pitch_mm, first_id, polarity)

@@ -7,10 +7,10 @@ precision of the calibration strongly depends on the precision of the markers in
 for more, so once a marker is read its three circles are measured again, along rays:
 
 * rays leave the centre of the first fit in the marker's rectified frame (the affine frame of the
-  centre circle's ellipse): 96 at even angles for the centre circle (radius 1), and 8 across the
+  centre circle's ellipse): 64 at even angles for the centre circle (radius 1), and 6 across the
   middle half of every ink sector of the code ring for its inner (2) and outer (3) edges, so the
   sector ends, whose corners are rounded by blur, are never used;
-* along each ray the image is sampled (bilinear) every 0.2 px over a window of +-3 px about the
+* along each ray the image is sampled (bilinear) every 0.25 px over a window of +-3 px about the
   expected edge (less where the neighbouring edge is closer);
 * the edge is where the profile's area says it is (the moment method): with the profile
   normalised from 0 at the window's start to 1 at its end (each end the mean of its first or
@@ -35,11 +35,11 @@ from labauto.vision.ellipse_fit import fit_ellipses_geometric_batch
 from labauto.vision.marker_codes import N_BITS, RING_INNER, RING_OUTER
 
 #: Rays on the centre circle; rays per ink sector (over its middle half) on each ring edge.
-CENTRE_RAYS = 96
-SECTOR_RAYS = 8
+CENTRE_RAYS = 64
+SECTOR_RAYS = 6
 #: Half window (px) and sample step (px) along a ray.
 WINDOW_PX = 3.0
-STEP_PX = 0.2
+STEP_PX = 0.25
 #: A ray is used when the ends of its profile differ by at least this share of the contrast.
 MIN_STEP_SHARE = 0.5
 #: A pass whose edges lay this close (mean, px) to its windows' centres is the last one.
@@ -61,17 +61,30 @@ def affine_frames(ellipses: list[Ellipse]) -> tuple[np.ndarray, np.ndarray]:
     return centres, maps
 
 
-def _rays(bits: np.ndarray, bit0: float) -> tuple[np.ndarray, np.ndarray]:
-    """Angles and circle index (0 centre, 1 inner, 2 outer) of one marker's rays."""
-    angles = [2.0 * np.pi * (np.arange(CENTRE_RAYS) + 0.5) / CENTRE_RAYS]
-    which = [np.zeros(CENTRE_RAYS, np.int64)]
+def _rays(bits: np.ndarray, bit0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Owner (marker index), angle and circle (0 centre, 1 inner, 2 outer) of every ray.
+
+    Rays come grouped by marker, then by circle: ``CENTRE_RAYS`` on the centre circle, then
+    ``SECTOR_RAYS`` per ink sector on the inner edge and the same on the outer edge.
+    """
+    k = len(bits)
+    centre = np.broadcast_to(2.0 * np.pi * (np.arange(CENTRE_RAYS) + 0.5) / CENTRE_RAYS,
+                             (k, CENTRE_RAYS))  # fmt: skip
     frac = 0.25 + 0.5 * (np.arange(SECTOR_RAYS) + 0.5) / SECTOR_RAYS
-    ink = np.flatnonzero(bits)
-    sector = (bit0 + 2.0 * np.pi * (ink[:, None] + frac[None, :]) / N_BITS).ravel()
-    for index in (1, 2):
-        angles.append(sector)
-        which.append(np.full(sector.size, index, np.int64))
-    return np.concatenate(angles), np.concatenate(which)
+    sector = bit0[:, None, None] + 2.0 * np.pi * (np.arange(N_BITS)[None, :, None] + frac) / N_BITS
+    ink = np.repeat(np.asarray(bits, bool), SECTOR_RAYS, axis=1)  # (k, N_BITS * SECTOR_RAYS)
+    sector = sector.reshape(k, -1)
+    # per marker: centre rays, its ink rays (inner edge), the same again (outer edge)
+    n_ink = ink.sum(axis=1)
+    counts = CENTRE_RAYS + 2 * n_ink
+    owner = np.repeat(np.arange(k), counts)
+    which = np.concatenate(
+        [np.repeat([0, 1, 2], [CENTRE_RAYS, n, n]) for n in n_ink.tolist()]
+    ) if k else np.empty(0, np.int64)  # fmt: skip
+    angles = np.concatenate(
+        [np.concatenate((centre[m], sector[m][ink[m]], sector[m][ink[m]])) for m in range(k)]
+    ) if k else np.empty(0)  # fmt: skip
+    return owner, angles, which
 
 
 Circles = tuple[Ellipse | None, Ellipse | None, Ellipse | None]
@@ -120,10 +133,7 @@ def refine_circles(
         tuple(Ellipse(e.center, (e.axes[0] * f, e.axes[1] * f), e.angle) for f in scale)
         for e in ellipses
     ]
-    rays = [_rays(b, t0) for b, t0 in zip(bits, bit0, strict=True)]
-    owner = np.repeat(np.arange(len(ellipses)), [r[0].size for r in rays])
-    theta = np.concatenate([r[0] for r in rays])
-    which = np.concatenate([r[1] for r in rays])
+    owner, theta, which = _rays(np.asarray(bits), np.asarray(bit0, np.float64))
     _, centre_maps = affine_frames(ellipses)
     unit = np.column_stack((np.cos(theta), np.sin(theta)))
     # every ray keeps its image direction (from the first fit's frame, where the sectors were

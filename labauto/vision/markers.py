@@ -270,22 +270,25 @@ def _read_codes(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Ids (-1: no code), scores, code bit-0 directions (rad), bits as read and where read bit 0
     starts (rad), all in the rectified frames of the ellipses."""
+    k = len(ellipses)
     centres, maps = affine_frames(ellipses)
     n_ring = N_BITS * SAMPLES_PER_BIT
-    ring = _sample(grey, centres, maps, _circle(READ_RADII, n_ring))
-    ring = ring.reshape(len(ellipses), len(READ_RADII), n_ring).mean(axis=1)
+    # the levels first: only a candidate with marker contrast has its ring sampled
     ink = np.median(_sample(grey, centres, maps, _circle(INK_RADII, 8)), axis=1)
     paper = np.median(_sample(grey, centres, maps, _circle(PAPER_RADII, 24)), axis=1)
     contrast = paper - ink
-    safe = np.where(np.abs(contrast) < 1e-9, 1e-9, contrast)
-    level = (ring - ink[:, None]) / safe[:, None]  # 0 ink .. 1 paper
+    lit = np.flatnonzero(np.abs(contrast) >= params.min_contrast)
+    ring = _sample(grey, centres[lit], maps[lit], _circle(READ_RADII, n_ring))
+    ring = ring.reshape(len(lit), len(READ_RADII), n_ring).mean(axis=1)
+    level = np.full((k, n_ring), 0.5)  # candidates without contrast read as undecided
+    level[lit] = (ring - ink[lit, None]) / contrast[lit, None]  # 0 ink .. 1 paper
     # per phase p: sector k covers samples k*S + p .. k*S + p + S - 1; drop one at each end
     s = SAMPLES_PER_BIT
-    best_margin = np.full(len(ellipses), -np.inf)
-    best_bits = np.zeros((len(ellipses), N_BITS), bool)
-    best_phase = np.zeros(len(ellipses), np.int64)
+    best_margin = np.full(k, -np.inf)
+    best_bits = np.zeros((k, N_BITS), bool)
+    best_phase = np.zeros(k, np.int64)
     for p in range(s):
-        rolled = np.roll(level, -p, axis=1).reshape(len(ellipses), N_BITS, s)[:, :, 1:-1]
+        rolled = np.roll(level, -p, axis=1).reshape(k, N_BITS, s)[:, :, 1:-1]
         means = rolled.mean(axis=2)
         margin = np.min(np.abs(means - 0.5), axis=1) * 2.0
         better = margin > best_margin

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from labauto.board_files import write_board
+from labauto.calibration.boards_io import write_board
 from labauto.cli.main import main
 from labauto.store.db import current_revision, head_revision
 from labauto.vision.boards import coded_board

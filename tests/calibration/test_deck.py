@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import yaml
 
+from labauto.calibration.deck import calibrate_deck
 from labauto.config import parse_config
-from labauto.deck_calibration import calibrate_deck
 from labauto.errors import CalibrationError
 from labauto.orchestrator.calibration import Calibration, stored_deck_calibration
 from labauto.store import Store
@@ -141,3 +141,18 @@ def test_a_marker_out_of_view_is_reported(tmp_path) -> None:
         _store_camera(store)
         with pytest.raises(CalibrationError, match="seen at 0 of 6 positions"):
             calibrate_deck(config, store)
+
+
+def test_board_source_through_the_config(tmp_path) -> None:
+    from labauto.calibration.boards_io import write_board
+
+    _, description = write_board(coded_board(4, 5, 16.0), tmp_path / "deckboard.svg")
+    board = {"path": str(description), "origin_mm": [50.0, 100.0, -30.0], "angle_deg": 4.0}
+    config = _config(tmp_path, source="board", board=board)
+    with Store.open(config.database.url) as store:
+        _store_camera(store)
+        cal, report = calibrate_deck(config, store)
+    assert report["source"] == "board" and report["markers"] == 20
+    assert cal.residual_mm < 0.01
+    pixels, deck = _surface_truth()
+    assert np.abs(cal.to_deck(pixels) - deck).max() < 0.02

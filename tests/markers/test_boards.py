@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from labauto.board_files import BoardFileError, read_board
+from labauto.calibration.boards_io import BoardFileError, read_board
 from labauto.cli.main import main
 from labauto.vision.boards import BoardError, board_from_dict
 from labauto.vision.marker_codes import RING_INNER, RING_OUTER

@@ -55,7 +55,14 @@ def camera_intrinsics(config: Config, store) -> tuple[np.ndarray, np.ndarray, tu
     return stored.camera_matrix, stored.dist_coeffs, stored.image_size, stored.name
 
 
-def _simulated_camera(config: Config, head: Callable[[], tuple] | None):
+def simulated_deck_camera(config: Config, head_position: Callable[[], tuple] | None):
+    """The simulated camera over the deck of a config (``calibration.deck.simulated_camera``).
+
+    It renders a board lying on the deck (``source: board``) and, with a ``head_position``
+    source (e.g. ``lambda: gantry.position``), the head's marker (``calibration.deck.
+    head_marker``) where the head is. Deck calibrations made in simulation are made with it;
+    a run's head check can use the same camera.
+    """
     from labauto.synthetic.camera import CameraModel, HeadMarker, SceneCamera
 
     deck = config.calibration.deck
@@ -66,11 +73,11 @@ def _simulated_camera(config: Config, head: Callable[[], tuple] | None):
     )  # fmt: skip
     sheets = []
     if deck.source == "board" and deck.board is not None:
-        from labauto.board_files import read_board
+        from labauto.calibration.boards_io import read_board
 
         sheets.append((read_board(deck.board.path), deck.board.origin_mm, deck.board.angle_deg))
     marker = HeadMarker(deck.head_marker.id, deck.head_marker.radius_mm, deck.head_marker.offset_mm)
-    return SceneCamera(model, head_position=head, head_marker=marker, sheets=sheets)
+    return SceneCamera(model, head_position=head_position, head_marker=marker, sheets=sheets)
 
 
 @contextlib.contextmanager
@@ -91,7 +98,7 @@ def _robot(config: Config) -> Iterator:
 def _frame_source(config: Config, robot) -> Callable[[], np.ndarray]:
     simulator = getattr(robot, "simulator", None) if robot is not None else None
     if config.robot.simulate and simulator is not None:
-        return _simulated_camera(config, lambda: simulator.position).capture
+        return simulated_deck_camera(config, lambda: simulator.position).capture
     from labauto.plugin_manager import load_plugins
 
     plugins = load_plugins(config.plugins.enabled, config.plugins.disabled)
@@ -171,7 +178,7 @@ def _head_pairs(config: Config, size: tuple[int, int], camera_name: str):
 
 
 def _board_pairs(config: Config, size: tuple[int, int], camera_name: str):
-    from labauto.board_files import read_board
+    from labauto.calibration.boards_io import read_board
     from labauto.imageio import read_image
     from labauto.vision.board_points import find_board_points
     from labauto.vision.boards import CodedBoard
@@ -185,7 +192,7 @@ def _board_pairs(config: Config, size: tuple[int, int], camera_name: str):
     if spec.image is not None:
         image = read_image(spec.image)
     elif config.robot.simulate:
-        image = _simulated_camera(config, None).capture()
+        image = simulated_deck_camera(config, None).capture()
     else:
         image = _frame_source(config, None)()
     _check_size(image, size, camera_name)

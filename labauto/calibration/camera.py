@@ -29,7 +29,7 @@ Image = np.ndarray | str | Path
 def _board(board: Board | str | Path) -> tuple[Board, str]:
     if isinstance(board, CodedBoard | GridBoard):
         return board, "the board"
-    from labauto.board_files import read_board
+    from labauto.calibration.boards_io import read_board
 
     return read_board(board), str(board)
 
