@@ -277,12 +277,8 @@ def _simulated_camera(
     """The simulated camera that sees the head (see :func:`head_check_for`)."""
     head = config.calibration.deck.head_marker
     if homography is None:  # a camera model: the deck calibration's own simulated camera
-        from labauto import deck_calibration
+        from labauto.calibration.deck import simulated_deck_camera
 
-        # issue 14's simulated deck camera (asked to be public as simulated_deck_camera)
-        simulated_deck_camera = getattr(
-            deck_calibration, "simulated_deck_camera", deck_calibration._simulated_camera
-        )
         if marker_id != head.id:
             raise RunError(
                 f"head_check.marker_id: {marker_id} is not the simulated deck camera's head "
