@@ -67,6 +67,13 @@ affects. They are what the real firmware cannot be made to do:
 ``restart``
     on the next line (not executed) the controller restarts by itself (a brown-out or a
     watchdog): position and homing are lost and the banner is printed at once.
+``lost_steps`` (``axis``, ``mm``, ``count``)
+    the next ``count`` moves along ``axis`` lose ``mm`` of their travel on it (at most all of
+    it): the carriage stops short, as when a stepper skips steps (too fast, a crash, a slipped
+    belt), while the controller counts every step as done. Status reports keep showing the
+    commanded position (:attr:`SimulatedGantry.reported_position`); where the head really is
+    (:attr:`SimulatedGantry.position`, what a camera sees) is off by the steps lost, until a
+    homing cycle finds the switches again and the offset is gone.
 ``disconnect``
     on the next line (not executed) drop the link: the TCP client is closed, the pty is hung up
     and replaced by a new one behind the stable path returned by :meth:`start_pty` - like a USB
@@ -98,7 +105,15 @@ from .grbl_sim_links import PtyEnd, TcpLink
 
 __all__ = ["FAULT_KINDS", "Fault", "SimulatedGantry"]
 
-FAULT_KINDS = ("no_reply", "garbled", "delay", "alarm_mid_move", "disconnect", "restart")
+FAULT_KINDS = (
+    "no_reply",
+    "garbled",
+    "delay",
+    "alarm_mid_move",
+    "disconnect",
+    "restart",
+    "lost_steps",
+)
 
 #: What a garbled reply looks like on the wire: bit errors, a stray control byte, no "ok".
 GARBLED_REPLY = b"\xf2o\x1b\xebk#\xa7"
@@ -129,6 +144,10 @@ class Fault:
         Alarm code raised by ``alarm_mid_move``.
     fraction
         Where along the move ``alarm_mid_move`` strikes (0 < fraction < 1).
+    axis
+        Axis (``"x"``, ``"y"`` or ``"z"``) of ``lost_steps``.
+    mm
+        Travel lost per move by ``lost_steps`` (mm, > 0).
     """
 
     kind: str
@@ -136,6 +155,8 @@ class Fault:
     seconds: float = 0.5
     code: int = 1
     fraction: float = 0.5
+    axis: str = "x"
+    mm: float = 1.0
 
     def __post_init__(self) -> None:
         if self.kind not in FAULT_KINDS:
@@ -146,6 +167,10 @@ class Fault:
             raise ValueError(f"fault {self.kind}: seconds must be >= 0, got {self.seconds}")
         if not 0 < self.fraction < 1:
             raise ValueError(f"fault {self.kind}: fraction must be in (0, 1), got {self.fraction}")
+        if self.axis not in ("x", "y", "z"):
+            raise ValueError(f"fault {self.kind}: axis must be x, y or z, got {self.axis!r}")
+        if not (math.isfinite(self.mm) and self.mm > 0):
+            raise ValueError(f"fault {self.kind}: mm must be > 0, got {self.mm}")
 
     @classmethod
     def from_config(cls, config: Fault | Mapping[str, object]) -> Fault:
@@ -177,6 +202,11 @@ class _Move:
     alarm_at: float | None = None  # fraction of the move where an injected alarm strikes
     alarm_code: int = 1
     elapsed: float = 0.0
+    slip: tuple[float, float, float] = (0.0, 0.0, 0.0)  # travel lost by a lost_steps fault
+
+    def progress(self) -> float:
+        """Share of the move done (0..1)."""
+        return 1.0 if self.duration <= 0 else min(max(self.elapsed / self.duration, 0.0), 1.0)
 
     def point(self, elapsed: float) -> tuple[float, float, float]:
         if self.duration <= 0:
@@ -424,7 +454,22 @@ class SimulatedGantry:
 
     @property
     def position(self) -> tuple[float, float, float]:
-        """Current machine position in mm (interpolated during a move)."""
+        """Where the head really is, machine coordinates in mm (interpolated during a move).
+
+        The same as :attr:`reported_position` unless a ``lost_steps`` fault struck.
+        """
+        with self._lock:
+            self._advance(time.monotonic())
+            slip = self._slip
+            if self._planner:
+                block = self._planner[0]
+                done = block.progress()
+                slip = tuple(s + done * b for s, b in zip(slip, block.slip, strict=True))
+            return tuple(p + s for p, s in zip(self._current_position(), slip, strict=True))  # type: ignore[return-value]
+
+    @property
+    def reported_position(self) -> tuple[float, float, float]:
+        """The machine position the controller believes and reports (``MPos``), in mm."""
         with self._lock:
             self._advance(time.monotonic())
             return self._current_position()
@@ -458,6 +503,7 @@ class SimulatedGantry:
     # ---------------------------------------------------------------- machine state
 
     def _power_up(self) -> None:
+        self._slip: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._state = "Alarm" if self._homing_lock else "Idle"
         self._homed = False
         self._reset_modal()
@@ -577,12 +623,23 @@ class SimulatedGantry:
             if dt >= remaining:
                 dt -= remaining
                 self._position = block.end
+                self._add_slip(block.slip)
                 self._planner.popleft()
             else:
                 block.elapsed += dt
                 dt = 0.0
         if not self._planner:
             self._state = "Idle"
+
+    def _add_slip(self, slip: tuple[float, float, float], share: float = 1.0) -> None:
+        self._slip = tuple(s + share * b for s, b in zip(self._slip, slip, strict=True))  # type: ignore[assignment]
+
+    def _drop_planner(self) -> None:
+        """Clear the planner where it is, keeping the share of lost travel already lost."""
+        if self._planner:
+            block = self._planner[0]
+            self._add_slip(block.slip, block.progress())
+        self._planner.clear()
 
     def _alarm(self, code: int, now: float) -> None:
         """Stop everything where it is, print ``ALARM:code`` and stay deaf ``alarm_delay``.
@@ -591,7 +648,7 @@ class SimulatedGantry:
         critical alarm the controller then prints ``[MSG:Reset to continue]`` and locks.
         """
         self._position = self._current_position()
-        self._planner.clear()
+        self._drop_planner()
         if self._pending is not None:
             self._pending.held = True
         self._lines.clear()
@@ -619,7 +676,7 @@ class SimulatedGantry:
     def _finish_reset(self) -> None:
         messages = ["ok"] if self._pending is not None and not self._pending.garbled else []
         self._position = self._current_position()
-        self._planner.clear()
+        self._drop_planner()
         self._pending = None
         self._lines.clear()
         self._rx.clear()
@@ -635,15 +692,35 @@ class SimulatedGantry:
 
     # ---------------------------------------------------------------- faults
 
+    def _lost_steps(
+        self, start: tuple[float, ...], target: tuple[float, ...]
+    ) -> tuple[float, float, float]:
+        """The travel a move loses to an armed ``lost_steps`` fault on an axis it moves."""
+        for fault in self._faults:
+            if fault.kind != "lost_steps":
+                continue
+            axis = "xyz".index(fault.axis)
+            travel = target[axis] - start[axis]
+            if travel == 0:
+                continue
+            self._take_fault_object(fault)
+            slip = [0.0, 0.0, 0.0]
+            slip[axis] = -math.copysign(min(fault.mm, abs(travel)), travel)
+            return tuple(slip)  # type: ignore[return-value]
+        return (0.0, 0.0, 0.0)
+
+    def _take_fault_object(self, fault: Fault) -> None:
+        fault.count -= 1
+        if fault.count == 0:
+            self._faults.remove(fault)
+
     def _take_fault(self, kind: str) -> Fault | None:
         for fault in self._faults:
             if fault.kind == kind:
                 if kind in ("alarm_mid_move", "disconnect", "restart"):
                     self._faults.remove(fault)
                 else:
-                    fault.count -= 1
-                    if fault.count == 0:
-                        self._faults.remove(fault)
+                    self._take_fault_object(fault)
                 return fault
         return None
 
@@ -763,6 +840,7 @@ class SimulatedGantry:
                 self._status_deferred = False
                 replies.append(self._status_report())
             self._homed = True
+            self._slip = (0.0, 0.0, 0.0)  # the switches give the real position back
             self._state = "Idle"
             return [*replies, *self._run_startup_blocks(), "ok"]
 
@@ -906,6 +984,7 @@ class SimulatedGantry:
         fault = self._take_fault("alarm_mid_move") if duration > 0 else None
         if fault is not None:
             move.alarm_at, move.alarm_code = fault.fraction, fault.code
+        move.slip = self._lost_steps(start, target)
         if not self._planner and self._state == "Idle":
             self._last_tick = time.monotonic()
             self._state = "Run"

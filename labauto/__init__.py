@@ -16,3 +16,7 @@ from labauto.api import analyze_plate, detect, detect_markers
 from labauto.calibration.camera import calibrate_camera
 
 __all__ = ["__version__", "analyze_plate", "calibrate_camera", "detect", "detect_markers"]
+
+from labauto.vision.tracking import MarkerTracker
+
+__all__ += ["MarkerTracker"]

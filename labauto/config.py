@@ -86,6 +86,9 @@ class GantryFault(Section):
     seconds: NonNegative = 0.5
     code: Annotated[int, Field(ge=1)] = 1
     fraction: Annotated[float, Field(gt=0, lt=1)] = 0.5
+    #: ``lost_steps``: the axis and the travel (mm) each affected move loses.
+    axis: Literal["x", "y", "z"] = "x"
+    mm: Positive = 1.0
 
     @model_validator(mode="before")
     @classmethod
@@ -371,6 +374,30 @@ class OutputConfig(Section):
     annotate: bool = True
 
 
+class HeadCheckConfig(Section):
+    """The camera watching the picking head (:mod:`labauto.orchestrator.head_check`)."""
+
+    enabled: bool = False
+    #: Id of the coded marker on the head; ``null``: ``calibration.deck.head_marker.id``.
+    marker_id: Annotated[int, Field(ge=0)] | None = None
+    #: Largest distance (mm) between the seen and the commanded head position.
+    tolerance_mm: Positive = 0.5
+    #: ``simulated``: rendered where the simulated gantry really is (needs ``robot.simulate``);
+    #: ``camera``: the camera driver's ``capture()``.
+    camera: Literal["simulated", "camera"] = "simulated"
+    #: Centre-circle radius (mm) of the marker the simulated camera draws with the config's
+    #: homography; ``null``: ``calibration.deck.head_marker.radius_mm``.
+    marker_radius_mm: Positive | None = None
+
+    @model_validator(mode="after")
+    def _known_marker(self) -> HeadCheckConfig:
+        from labauto.vision.marker_codes import n_codes
+
+        if self.marker_id is not None and self.marker_id >= n_codes():
+            raise ValueError(f"marker_id: {self.marker_id} is no marker id (0-{n_codes() - 1})")
+        return self
+
+
 class Config(Section):
     """A whole workcell configuration."""
 
@@ -387,6 +414,7 @@ class Config(Section):
     picking: PickingConfig = PickingConfig()
     output: OutputConfig = OutputConfig()
     run: RunSection = RunSection()
+    head_check: HeadCheckConfig = HeadCheckConfig()
 
 
 _EXPECTED = {

@@ -59,6 +59,10 @@ def _register_commands() -> None:
     cli.add_command(markers_group)
     cli.add_command(calibrate_group)
 
+    from labauto.cli import track_cmd
+
+    cli.add_command(track_cmd.track_cmd)
+
 
 _register_commands()
 

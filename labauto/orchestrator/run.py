@@ -17,6 +17,10 @@ are identified by their place in the run (the camera's order), never by their pi
 run finds plate 2 as plate 2 even if it looks exactly like plate 1 (a repeated frame, which is
 reported as a warning). So nothing is picked twice and nothing stored is lost.
 
+With ``head_check`` on, the camera confirms the head's position over each pick before the tool
+descends and after the probe (:mod:`labauto.orchestrator.head_check`); a miss fails the pick
+(``head.miss``), nothing moves again, and the run fails.
+
 The outcome is honest: ``succeeded`` only when every planned pick was analysed,
 ``completed_with_errors`` when the run got through its plates but some picks failed or have an
 unknown outcome, ``failed`` when it could not go on (resumable with ``--resume ID``). A device
@@ -43,6 +47,7 @@ from labauto.drivers.errors import DeviceError, DeviceRefused
 from labauto.errors import RunError
 from labauto.orchestrator.calibration import Calibration, stored_deck_calibration
 from labauto.orchestrator.control import EmergencyStop, RunControl, StopRequested
+from labauto.orchestrator.head_check import HeadCheck, HeadMiss, head_check_for
 from labauto.orchestrator.planning import PickRules, plan_picks
 from labauto.orchestrator.recovery import with_retries
 from labauto.plugin_manager import Plugins
@@ -178,6 +183,7 @@ class ColonyPickingRun:
         self.reporter = reporter
         self.output_dir = Path(config.output.dir) / f"run-{run_id:04d}"
         self.exchanges = ExchangeLog(store, run_id)
+        self.head_check: HeadCheck | None = None
         self.plate_params = plate_params(config)
         self.rules = PickRules(
             max_picks=config.picking.max_picks,
@@ -233,6 +239,7 @@ class ColonyPickingRun:
                 f"over {calibration.n_points} points ({kind})",
                 data=calibration.to_dict(),
             )
+            self.head_check = head_check_for(self.config, self.workcell, calibration)
             self._prepare_devices()
             for position, (plate_name, image) in enumerate(self.workcell.camera):
                 self._checkpoint()
@@ -457,9 +464,12 @@ class ColonyPickingRun:
         robot, analyzer, cfg = self.workcell.robot, self.workcell.analyzer, self.config.robot
         sample_id = f"R{self.run_id:04d}P{pick.id:05d}"
         started = time.perf_counter()
+        missed: HeadMiss | None = None
         try:
             self._pick_state(pick, PickState.MOVING, sample_id=sample_id)
+            self._confirm_head(pick, travel=True)  # over the colony, before descending
             robot.pick(pick.deck_x_mm, pick.deck_y_mm, cfg.pick_z_mm, cfg.dwell_s)
+            self._confirm_head(pick, travel=False)  # back at safe height after the probe
             self._pick_state(pick, PickState.PICKED)
             robot.deposit(cfg.deposit.x, cfg.deposit.y, cfg.deposit.z, cfg.dwell_s)
             self._pick_state(pick, PickState.DELIVERED)
@@ -467,6 +477,16 @@ class ColonyPickingRun:
             self.exchanges.flush()
             self.store.add_analyzer_result(pick.id, sample_id, values)
             self._pick_state(pick, PickState.ANALYZED)
+        except HeadMiss as exc:
+            missed = exc
+            self.exchanges.flush()
+            self.store.set_pick_state(pick.id, PickState.FAILED, error=str(exc))
+            self.event(
+                "head.miss",
+                str(exc),
+                source="camera",
+                data={"pick_id": pick.id, **exc.result.to_dict()},
+            )
         except DeviceError as exc:
             if self.control.estopped:
                 raise EmergencyStop("emergency stop") from exc
@@ -479,6 +499,24 @@ class ColonyPickingRun:
         )
         final = self.store.get_pick(pick.id)
         self._hook("labauto_pick_finished", run_id=self.run_id, pick=final.to_dict())
+        if missed is not None:
+            raise missed  # the run stops: no further motion on a machine that lost its place
+
+    def _confirm_head(self, pick: Any, *, travel: bool) -> None:
+        """With a head check: the camera confirms the head is over the pick (else HeadMiss)."""
+        if self.head_check is None:
+            return
+        if travel:
+            self.workcell.robot.move_to(pick.deck_x_mm, pick.deck_y_mm)
+        result = self.head_check.check(pick.deck_x_mm, pick.deck_y_mm)
+        if not result.ok:
+            raise HeadMiss(pick.id, result)
+        self.event(
+            "head.checked",
+            result.message(),
+            source="camera",
+            data={"pick_id": pick.id, **result.to_dict()},
+        )
 
     def _pick_state(self, pick: Any, state: PickState, **fields: Any) -> None:
         self.exchanges.flush()
