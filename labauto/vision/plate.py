@@ -45,7 +45,10 @@ Pipeline and the choices it makes where the paper leaves room:
    ``des_threshold_deg``, and no waist: the deepest concavity (distance from the convex hull)
    is below ``max_concavity`` times the inscribed radius. D_alpha alone does not separate a
    merged pair of unequal colonies (they read 14-46 degrees, single colonies 2-21), the waist
-   does (measured: singles <= 0.12, merged >= 0.22). Merged: every other object. Mixed: a DES
+   does (measured: singles <= 0.12, merged >= 0.22). Real colonies are round, so an authentic
+   colony's axis ratio is at most ``max_authentic_elongation`` (1.3), and its distance transform
+   has one peak (step 5 counts every body): two colonies that meet in a shallow waist pass the
+   DES tests, and picking one would take a mix of two. Merged: every other object. Mixed: a DES
    whose colours do not follow one species' dome. Its pixels at least ``edge_skip_px`` inside
    the boundary are fitted per channel by a quadratic in the normalised distance to the
    boundary (the dome shading of one species); a pixel farther than ``mix_residual`` grey
@@ -182,6 +185,11 @@ class PlateParams:
     max_concavity : float
         Largest depth of a concavity (distance from the convex hull) relative to the inscribed
         radius for a DES; a waist between two colonies is deeper.
+    max_authentic_elongation : float
+        Largest second-moment axis ratio of an authentic colony; a longer DES is merged (with
+        its count). Measured on the AGAR photographs: single colonies 1.01-1.21 (5th-95th
+        percentile, 2.8 % above 1.3), DES bodies that hold two colonies 1.03-1.72 (median 1.38,
+        22 of 40 above 1.3).
     edge_skip_mm, edge_skip_px : float
         Pixels this close to a colony's boundary are left out of the mixed-colony test.
     mix_residual : float
@@ -238,6 +246,7 @@ class PlateParams:
     des_threshold_deg: float = 25.0
     statistic: str = "median"
     max_concavity: float = 0.17
+    max_authentic_elongation: float = 1.3
     edge_skip_mm: float = 0.25
     edge_skip_px: float | None = None
     mix_residual: float = 24.0
@@ -292,6 +301,11 @@ class PlateParams:
         if self.min_colony_diameter_mm > self.max_colony_diameter_mm:
             raise ValueError(
                 "PlateParams.min_colony_diameter_mm must not exceed max_colony_diameter_mm"
+            )
+        if not self.max_authentic_elongation >= 1:
+            raise ValueError(
+                "PlateParams.max_authentic_elongation must be >= 1, got "
+                f"{self.max_authentic_elongation!r}"
             )
         if self.faint_min_diameter_mm > self.faint_max_diameter_mm:
             raise ValueError(
@@ -606,6 +620,8 @@ class _Bodies:
         Area above ``max_fill_ratio`` inscribed discs: a pen stroke (artefact).
     concavity : ndarray of float
         Depth of the deepest concavity over ``r_in`` (``inf`` where not measured).
+    elongation : ndarray of float
+        Axis ratio ``sqrt(l1 / l2)`` of the contour's second moments.
     """
 
     index: np.ndarray
@@ -621,24 +637,27 @@ class _Bodies:
     r_in: np.ndarray
     stroke: np.ndarray
     concavity: np.ndarray
+    elongation: np.ndarray
 
 
-def _moment_reject(contour: np.ndarray, params: PlateParams) -> str | None:
-    """Artefact tests of step 3 that need only the contour: the reject reason, or None."""
+def _moment_test(contour: np.ndarray, params: PlateParams) -> tuple[str | None, float]:
+    """Artefact tests of step 3 that need only the contour: the reject reason (or None) and
+    the elongation ``sqrt(l1 / l2)`` of the second moments."""
     m = cv2.moments(contour)
-    area = m["m00"] + len(contour) / 2.0 + 1.0  # polygon through pixel centres + half-pixel rim
-    if area < params.min_colony_area_px:
-        return "dust"
-    if area > params.max_colony_area_px:
-        return "large"
-    if 2.0 * area / max(cv2.arcLength(contour, True), 1.0) < params.min_width_px:
-        return "thin"
     mu20, mu02, mu11 = m["mu20"], m["mu02"], m["mu11"]
     half_trace = (mu20 + mu02) / 2.0
     spread = math.sqrt(((mu20 - mu02) / 2.0) ** 2 + mu11 * mu11)
-    if half_trace + spread > params.max_elongation**2 * max(half_trace - spread, 1e-9):
-        return "elongated"
-    return None
+    elongation = math.sqrt((half_trace + spread) / max(half_trace - spread, 1e-9))
+    area = m["m00"] + len(contour) / 2.0 + 1.0  # polygon through pixel centres + half-pixel rim
+    if area < params.min_colony_area_px:
+        return "dust", elongation
+    if area > params.max_colony_area_px:
+        return "large", elongation
+    if 2.0 * area / max(cv2.arcLength(contour, True), 1.0) < params.min_width_px:
+        return "thin", elongation
+    if elongation > params.max_elongation:
+        return "elongated", elongation
+    return None, elongation
 
 
 def _measure_bodies(
@@ -658,11 +677,12 @@ def _measure_bodies(
     only for the contours where ``need_concavity`` is true (``inf`` elsewhere): the caller
     leaves out those that cannot be a DES anyway (centroid outside or D_alpha too large).
     """
-    survivors = []
+    survivors, elongations = [], []
     for k, contour in enumerate(contours):
-        reason = _moment_reject(contour, params)
+        reason, elongation = _moment_test(contour, params)
         if reason is None:
             survivors.append(k)
+            elongations.append(elongation)
         else:
             rejected[reason] = rejected.get(reason, 0) + 1
     index = np.array(survivors, dtype=np.intp)
@@ -672,7 +692,7 @@ def _measure_bodies(
         canvas_none = np.zeros((0, 1), np.uint8)
         return _Bodies(
             none, none, none, none, none, none, none, canvas_none,
-            canvas_none.astype(np.float32), empty, empty, empty.astype(bool), empty,
+            canvas_none.astype(np.float32), empty, empty, empty.astype(bool), empty, empty,
         )  # fmt: skip
     boxes = np.array([cv2.boundingRect(c) for c in kept], np.intp).reshape(-1, 4)
     left, top = boxes[:, 0] - _PAD, boxes[:, 1] - _PAD
@@ -719,8 +739,9 @@ def _measure_bodies(
         depth = np.maximum.reduceat(hull_dt.max(axis=1), row).astype(np.float64)
         concavity[wanted] = depth[wanted] / np.maximum(r_in[wanted], 1.0)
     return _Bodies(
-        index, top, left, height, width, row, row_body, mask, dt, area, r_in, stroke, concavity
-    )
+        index, top, left, height, width, row, row_body, mask, dt, area, r_in, stroke, concavity,
+        np.asarray(elongations, float),
+    )  # fmt: skip
 
 
 def _mix_scores(
@@ -923,10 +944,13 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
             rejected["ink"] = int(ink.sum())
             bodies.stroke |= ink
     des = des_shape[bodies.index] & (bodies.concavity < params.max_concavity) & ~bodies.stroke
+    des &= bodies.elongation <= params.max_authentic_elongation
     stage_done("measures")
-    merged = ~des & ~bodies.stroke
+    # every body is counted: a DES holding two peaks apart (two colonies that meet in a shallow
+    # waist) is merged, never offered for picking
+    counts = _merged_counts(bodies, ~bodies.stroke, params.valley_ratio)
+    des &= counts == 1
     mix = _mix_scores(roi, bodies, des, params)
-    counts = _merged_counts(bodies, merged, params.valley_ratio)
 
     colonies: list[Colony] = []
     for b, k in enumerate(bodies.index.tolist()):

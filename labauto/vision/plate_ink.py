@@ -13,7 +13,10 @@ colonies of the real plates we measured (cream, yellow, brown, olive, white) in 
 * **Shape or texture.** An ink-coloured body is ink when it is also a stroke (its area over 3.5
   inscribed discs; or narrower than 1.6 mm and over two discs; or narrower than 1.3 mm, a dot or
   a pen line) or dotted: fewer than 75 % of its pixels take at least half its mean darkening
-  (the agar between printed dots; a colony is dark all over, dome shading included).
+  (the agar between printed dots; a colony is dark all over, dome shading included) and those
+  dark pixels lie in two or more pieces (the dots; a dark colony with a pale sector of a second
+  species is one dark piece). Measured on the AGAR photographs: requiring the pieces changes
+  nothing there (precision 0.907 either way; three pieces: 0.903).
 
 Limit: a dark grey or blue colony (some chromogenic media) that is small or stroke-shaped
 reads as ink; ``PlateParams.reject_ink`` turns the test off for such plates.
@@ -24,6 +27,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import cv2
 import numpy as np
 
 INK_DARKER = -0.10  # least mean relative darkening of an ink body
@@ -32,6 +36,7 @@ INK_FILL = 3.5  # a stroke: area over this many inscribed discs ...
 INK_STROKE_MM = 1.6  # ... or narrower than this and over two discs ...
 INK_DOT_MM = 1.3  # ... or narrower than this, whatever its shape
 INK_SOLID = 0.75  # a dotted body has fewer of its pixels this dark (relative to its mean)
+INK_DOTS = 2  # ... and its dark pixels lie in at least this many pieces
 
 
 def ink_bodies(
@@ -70,6 +75,14 @@ def ink_bodies(
         dark = float(darkening.mean())
         if not (dark >= -INK_DARKER and rel[0] - rel[2] >= INK_BLUE_MARGIN):
             continue
-        dotted = np.mean(darkening >= 0.5 * dark) < INK_SOLID
+        dark_px = darkening >= 0.5 * dark
+        dotted = np.mean(dark_px) < INK_SOLID and _pieces(inside, dark_px) >= INK_DOTS
         out[b] = bool(strokelike[b] or dotted)
     return out
+
+
+def _pieces(inside: np.ndarray, dark: np.ndarray) -> int:
+    """Connected pieces (8-neighbourhood) of the ``dark`` pixels of a body's mask ``inside``."""
+    canvas = np.zeros(inside.shape, np.uint8)
+    canvas[inside] = dark
+    return cv2.connectedComponents(canvas, connectivity=8)[0] - 1
