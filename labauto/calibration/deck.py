@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,6 +31,9 @@ from labauto.config import Config
 from labauto.errors import CalibrationError
 from labauto.vision.deck import DeckCalibration, DeckCalibrationFailed, board_to_deck
 from labauto.vision.markers import detect_markers
+
+if TYPE_CHECKING:
+    from labauto.store.calibrations import CalibrationStore
 
 
 def head_positions(config: Config) -> list[tuple[float, float, float]]:
@@ -40,12 +44,12 @@ def head_positions(config: Config) -> list[tuple[float, float, float]]:
     return [(float(x), float(y), float(z)) for z in grid.z_mm for y in ys for x in xs]
 
 
-def camera_intrinsics(config: Config, store) -> tuple[np.ndarray, np.ndarray, tuple[int, int], str]:
+def camera_intrinsics(
+    config: Config, store: CalibrationStore
+) -> tuple[np.ndarray, np.ndarray, tuple[int, int], str]:
     """The stored camera calibration the deck calibration builds on."""
-    from labauto.store.calibrations import load_calibration
-
     name = config.calibration.deck.camera
-    stored = load_calibration(store.engine, name, "camera")
+    stored = store.latest_calibration(name, "camera")
     if stored is None:
         which = f"named {name!r}" if name else "at all"
         raise CalibrationError(
@@ -121,7 +125,7 @@ def _check_size(image: np.ndarray, size: tuple[int, int], camera_name: str) -> N
         )
 
 
-def calibrate_deck(config: Config, store) -> tuple[DeckCalibration, dict]:
+def calibrate_deck(config: Config, store: CalibrationStore) -> tuple[DeckCalibration, dict]:
     """Run the configured deck calibration; returns it and a report (positions, camera used).
 
     Raises

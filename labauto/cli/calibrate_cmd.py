@@ -58,10 +58,8 @@ def camera_cmd(
 
         write_opencv_yaml(out, doc)
     if save_as:
-        from labauto.store.calibrations import save_calibration
-
         with _store(config) as store:
-            save_calibration(store.engine, save_as, "camera", doc)
+            store.save_calibration(save_as, "camera", doc)
     if as_json:
         click.echo(json.dumps(doc, indent=2))
         return
@@ -85,10 +83,9 @@ def export_cmd(name: str, out: str, config: Config) -> None:
     """Write the stored calibration NAME as OpenCV FileStorage YAML."""
     from labauto.calibration.files import write_opencv_yaml
     from labauto.errors import CalibrationError
-    from labauto.store.calibrations import load_calibration
 
     with _store(config) as store:
-        stored = load_calibration(store.engine, name)
+        stored = store.latest_calibration(name)
     if stored is None:
         raise CalibrationError(f"no stored calibration named {name!r} (see labauto calibrate list)")
     write_opencv_yaml(out, {**stored.data, "residual_mm": stored.residual_mm})
@@ -99,10 +96,8 @@ def export_cmd(name: str, out: str, config: Config) -> None:
 @config_option
 def list_cmd(config: Config) -> None:
     """The stored calibrations."""
-    from labauto.store.calibrations import list_calibrations
-
     with _store(config) as store:
-        rows = list_calibrations(store.engine)
+        rows = store.list_calibrations()
     for r in rows:
         extra = f", residual {r.residual_mm:.3f} mm" if r.residual_mm is not None else ""
         rms = f"RMS {r.rms_px:.4f} px" if r.rms_px is not None else "no RMS"
@@ -119,7 +114,6 @@ def list_cmd(config: Config) -> None:
 def deck_cmd(as_json: bool, no_save: bool, config: Config) -> None:
     """The camera's pose over the deck and the pixel-to-deck map (calibration.deck)."""
     from labauto.calibration.deck import calibrate_deck
-    from labauto.store.calibrations import save_calibration
 
     with _store(config) as store:
         cal, report = calibrate_deck(config, store)
@@ -128,7 +122,7 @@ def deck_cmd(as_json: bool, no_save: bool, config: Config) -> None:
             doc["positions"] = report["positions"]
         name = config.calibration.deck.name
         if not no_save:
-            save_calibration(store.engine, name, "deck", doc, residual_mm=cal.residual_mm)
+            store.save_calibration(name, "deck", doc, residual_mm=cal.residual_mm)
     if as_json:
         click.echo(json.dumps(doc, indent=2))
         return

@@ -12,12 +12,16 @@ construction, which says nothing about its quality: ``overdetermined`` tells the
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
 
 from labauto.errors import CalibrationError
-from labauto.vision.deck import residual_check
+from labauto.vision.deck import DeckCalibration, residual_check
+
+if TYPE_CHECKING:
+    from labauto.store.calibrations import CalibrationStore
 
 
 @dataclass(frozen=True)
@@ -113,28 +117,43 @@ def _apply(homography: np.ndarray, points: np.ndarray) -> np.ndarray:
     return cv2.perspectiveTransform(points.reshape(-1, 1, 2), homography).reshape(-1, 2)
 
 
-def stored_deck_calibration(config, store):
+#: What to do about a stored deck calibration that a run refuses.
+_REDO_DECK = (
+    "calibrate the deck again (labauto calibrate deck) or set calibration.use_stored: false"
+)
+
+
+def stored_deck_calibration(config: Any, store: CalibrationStore) -> DeckCalibration | None:
     """The stored deck calibration a run uses, or None (then the homography of the config).
 
     ``calibration.use_stored`` on and a stored ``deck`` calibration named
     ``calibration.deck.name``: it is used if its residual is within
     ``calibration.max_residual_mm``, else refused.
+
+    Raises
+    ------
+    CalibrationError
+        The stored calibration cannot be read, or its residual is over the limit (one line
+        naming it and what to do).
     """
     if not config.calibration.use_stored:
         return None
-    from labauto.store.calibrations import load_calibration
-    from labauto.vision.deck import DeckCalibration
-
     name = config.calibration.deck.name
-    stored = load_calibration(store.engine, name, "deck")
+    stored = store.latest_calibration(name, "deck")
     if stored is None:
         return None
-    deck = DeckCalibration.from_dict(stored.data)
+    try:
+        deck = DeckCalibration.from_dict(stored.data)
+    except (KeyError, TypeError, ValueError) as exc:
+        problem = f"no {exc}" if isinstance(exc, KeyError) else str(exc)
+        raise CalibrationError(
+            f"stored deck calibration {name!r} (id {stored.id}) cannot be read ({problem}): "
+            + _REDO_DECK
+        ) from None
     limit = config.calibration.max_residual_mm
     if deck.residual_mm > limit:
         raise CalibrationError(
             f"stored deck calibration {name!r} (id {stored.id}) has a residual of "
-            f"{deck.residual_mm:.3f} mm, over the limit of {limit:.3f} mm: calibrate the deck "
-            "again (labauto calibrate deck) or set calibration.use_stored: false"
+            f"{deck.residual_mm:.3f} mm, over the limit of {limit:.3f} mm: " + _REDO_DECK
         )
     return deck

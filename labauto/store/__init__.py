@@ -7,12 +7,14 @@ Typical use by the orchestrator::
     store = Store.open("sqlite:///runs/labauto.db")   # migrates to the newest schema
     run_id = store.create_run("plate batch 7", config)
     store.set_run_state(run_id, "running")
+    deck = store.latest_calibration("deck", "deck")   # the calibration in force, or None
     ...
 
 See :mod:`labauto.store.repository` for the rules every method follows (commit per write,
 frozen records, audited state changes) and :mod:`labauto.store.states` for the state machines.
 """
 
+from .calibrations import StoredCalibration
 from .convert import colony_rows, detection_rows, plate_detection_rows
 from .db import (
     current_revision,
@@ -35,6 +37,7 @@ from .errors import (
 from .models import (
     AnalyzerResult,
     Base,
+    CalibrationRecord,
     Colony,
     Detection,
     Event,
@@ -76,6 +79,7 @@ __all__ = [
     "AnalyzerResult",
     "AnalyzerResultRecord",
     "Base",
+    "CalibrationRecord",
     "Colony",
     "ColonyClass",
     "ColonyRecord",
@@ -102,6 +106,7 @@ __all__ = [
     "RunSummary",
     "Store",
     "StoreError",
+    "StoredCalibration",
     "UTCDateTime",
     "can_transition_pick",
     "can_transition_run",

@@ -37,6 +37,14 @@ def _centroid(obj: Mapping[str, Any], where: str) -> tuple[float, float]:
     return x, y
 
 
+def _indexed_centroid(obj: Mapping[str, Any], where: str) -> tuple[Any, float, float]:
+    """An object's ``id`` and ``centroid`` (x, y); InvalidValue naming ``where`` otherwise."""
+    if "id" not in obj:
+        raise InvalidValue(f"{where}: missing 'id'")
+    x, y = _centroid(obj, where)
+    return obj["id"], x, y
+
+
 def detection_rows(result: Mapping[str, Any]) -> list[dict[str, Any]]:
     """Rows for :meth:`Store.add_detections` from a detection result's JSON.
 
@@ -64,11 +72,8 @@ def detection_rows(result: Mapping[str, Any]) -> list[dict[str, Any]]:
         raise InvalidValue("detection result must have 'method' and 'objects'") from exc
     rows = []
     for position, obj in enumerate(objects):
-        where = f"detection result object {position}"
-        if "id" not in obj:
-            raise InvalidValue(f"{where}: missing 'id'")
-        x, y = _centroid(obj, where)
-        row = {"object_index": obj["id"], "method": method, "centroid_x": x, "centroid_y": y}
+        index, x, y = _indexed_centroid(obj, f"detection result object {position}")
+        row = {"object_index": index, "method": method, "centroid_x": x, "centroid_y": y}
         row.update((key, obj[key]) for key in _DETECTION_COPIED if key in obj)
         rows.append(row)
     return rows
@@ -133,13 +138,11 @@ def colony_rows(
     rows = []
     for position, colony in enumerate(colonies):
         where = f"plate result colony {position}"
-        if "id" not in colony:
-            raise InvalidValue(f"{where}: missing 'id'")
-        x, y = _centroid(colony, where)
+        index, x, y = _indexed_centroid(colony, where)
         if "class" not in colony:
             raise InvalidValue(f"{where}: missing 'class'")
         row = {
-            "colony_index": colony["id"],
+            "colony_index": index,
             "klass": colony["class"],
             "centroid_x": x,
             "centroid_y": y,

@@ -16,7 +16,7 @@ from .errors import InvalidValue
 from .models import Colony, Detection
 from .records import ColonyRecord, DetectionRecord, to_record
 from .rows import RowShape
-from .states import ColonyClass
+from .states import ColonyClass, member_of
 
 DETECTION_ROW = RowShape(
     "detections",
@@ -76,13 +76,7 @@ def flatten_ellipse(row: Mapping[str, Any]) -> Mapping[str, Any]:
 def colony_values(i: int, row: dict[str, Any], fixed: dict[str, Any]) -> dict[str, Any]:
     """Colony row ``i`` normalised for an insert, its class checked (``InvalidValue`` if bad)."""
     values = COLONY_ROW.normalise(i, row, fixed)
-    try:
-        values["klass"] = ColonyClass(values["klass"])
-    except ValueError:
-        raise InvalidValue(
-            f"colonies row {i}: klass {values['klass']!r} is not one of "
-            f"{[c.value for c in ColonyClass]}"
-        ) from None
+    values["klass"] = member_of(ColonyClass, values["klass"], f"colonies row {i}: klass")
     return values
 
 

@@ -17,7 +17,7 @@ from .errors import InvalidTransition, InvalidValue
 from .models import AnalyzerResult, Colony, Event, Pick, Run
 from .records import AnalyzerResultRecord, PickRecord, to_record
 from .rows import RowShape, json_data, plain_scalar
-from .states import PICK_TRANSITIONS, PICKS_IN_FLIGHT, PickState
+from .states import PICK_TRANSITIONS, PICKS_IN_FLIGHT, PickState, member_of
 from .types import utcnow
 
 """Fields of a colony row (besides ``run_id`` and ``image_id``, given per call)."""
@@ -33,15 +33,6 @@ PICK_UPDATABLE_FIELDS = frozenset(
     {"deck_x_mm", "deck_y_mm", "sample_id", "needs_attention", "error"}
 )
 """Fields :meth:`Store.set_pick_state` may change together with the state."""
-
-
-def _pick_state(value: PickState | str) -> PickState:
-    try:
-        return PickState(value)
-    except ValueError:
-        raise InvalidValue(
-            f"pick state {value!r} is not one of {[s.value for s in PickState]}"
-        ) from None
 
 
 _PICK_FIELD_TYPES: dict[str, type] = {
@@ -180,7 +171,7 @@ class PickStore(StoreBase):
         NotFound, InvalidTransition, InvalidValue
             Unknown pick, a move not allowed, an unknown field.
         """
-        new = _pick_state(new_state)
+        new = member_of(PickState, new_state, "pick state")
         unknown_fields = set(fields) - PICK_UPDATABLE_FIELDS
         if unknown_fields:
             raise InvalidValue(

@@ -21,11 +21,13 @@ Rules that hold for every method
 The methods live with their aggregate, each a class over :class:`~labauto.store.base.StoreBase`:
 runs and their lease (:mod:`.runs`), plates and images (:mod:`.plates`), detections and
 colonies (:mod:`.detections`), picks and analyzer results (:mod:`.picks`), events
-(:mod:`.events`). :class:`Store` is all of them on one engine.
+(:mod:`.events`), camera and deck calibrations (:mod:`.calibrations`). :class:`Store` is all of
+them on one engine.
 """
 
 from __future__ import annotations
 
+from .calibrations import CalibrationStore
 from .detections import COLONY_ROW, DETECTION_ROW, DetectionStore
 from .events import EventStore
 from .picks import PICK_ROW, PICK_UPDATABLE_FIELDS, PickStore
@@ -41,8 +43,9 @@ __all__ = [
 ]
 
 
-class Store(RunStore, PlateStore, DetectionStore, PickStore, EventStore):
-    """Storage of runs, plates, images, detections, colonies, picks, results and events.
+class Store(RunStore, PlateStore, DetectionStore, PickStore, EventStore, CalibrationStore):
+    """Storage of runs, plates, images, detections, colonies, picks, results, events and
+    calibrations.
 
     Parameters
     ----------

@@ -12,22 +12,13 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from .base import StoreBase
-from .errors import InvalidTransition, InvalidValue
+from .errors import InvalidTransition
 from .leases import LeaseHeld, LeaseLost, LeaseOwner, StaleCheck, heartbeat_age
 from .models import Event, Pick, Run
 from .records import RunRecord, RunSummary, to_record
 from .rows import json_data
-from .states import RUN_FINAL_STATES, RUN_TRANSITIONS, PickState, RunState
+from .states import RUN_FINAL_STATES, RUN_TRANSITIONS, PickState, RunState, member_of
 from .types import utcnow
-
-
-def _run_state(value: RunState | str) -> RunState:
-    try:
-        return RunState(value)
-    except ValueError:
-        raise InvalidValue(
-            f"run state {value!r} is not one of {[s.value for s in RunState]}"
-        ) from None
 
 
 class RunStore(StoreBase):
@@ -185,7 +176,7 @@ class RunStore(StoreBase):
         InvalidTransition
             The move is not allowed (the message lists the allowed ones).
         """
-        new = _run_state(state)
+        new = member_of(RunState, state, "run state")
         with self._write("set_run_state") as session:
             run = self._get(session, Run, run_id, lock=True)
             old = run.state

@@ -34,6 +34,9 @@ and ``failed`` are final.
 from __future__ import annotations
 
 from enum import StrEnum
+from typing import TypeVar
+
+from .errors import InvalidValue
 
 
 class RunState(StrEnum):
@@ -118,6 +121,24 @@ PICKS_IN_FLIGHT: frozenset[PickState] = frozenset(
     {PickState.MOVING, PickState.PICKED, PickState.DELIVERED}
 )
 """Pick states in which a colony has been touched but its probe has not reached the analyzer."""
+
+
+E = TypeVar("E", bound=StrEnum)
+
+
+def member_of(choices: type[E], value: E | str, what: str) -> E:
+    """``value`` as a member of ``choices`` (:class:`RunState`, :class:`PickState`, ...).
+
+    Raises
+    ------
+    InvalidValue
+        ``value`` is none of them (the message names ``what``, e.g. ``"run state"``, and the
+        allowed values).
+    """
+    try:
+        return choices(value)
+    except ValueError:
+        raise InvalidValue(f"{what} {value!r} is not one of {[c.value for c in choices]}") from None
 
 
 def can_transition_run(current: RunState | str, new: RunState | str) -> bool:

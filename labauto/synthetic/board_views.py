@@ -12,6 +12,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from labauto.synthetic.grey_look import GreyLook
 from labauto.synthetic.markers import (
     PlaneToImage,
     camera_map,
@@ -19,7 +20,6 @@ from labauto.synthetic.markers import (
     draw_marker,
     draw_ring,
     fill_polygons,
-    finish,
 )
 from labauto.vision.boards import Board, CodedBoard
 
@@ -159,12 +159,13 @@ def render_board_view(
     each point (distortion included).
     """
     to_image = camera_map(camera_matrix, dist_coeffs, rvec, tvec)
-    width, height = image_size
-    img = np.full((height, width), float(table))
+    look = GreyLook(table, ink, blur_sigma, noise_sigma)
+    img = look.canvas(image_size)
     truth = draw_board(img, board, to_image, paper=paper, ink=ink)
     if light_gain != (1.0, 1.0):
+        width, height = image_size
         yy, xx = np.mgrid[0:height, 0:width]
         r = np.hypot(xx - width * 0.3, yy - height * 0.4) / np.hypot(width, height)
         img *= light_gain[1] - (light_gain[1] - light_gain[0]) * np.clip(r / 0.8, 0, 1)
     rng = rng if rng is not None else np.random.default_rng(0)
-    return finish(img, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng), truth
+    return look.develop(img, rng), truth

@@ -21,13 +21,13 @@ import cv2
 import numpy as np
 
 from labauto.synthetic.board_views import draw_board
+from labauto.synthetic.grey_look import GreyLook
 from labauto.synthetic.markers import (
     PlaneToImage,
     camera_map,
     disc_polygon,
     draw_marker,
     fill_polygons,
-    finish,
 )
 from labauto.synthetic.plates import generate_plate
 from labauto.vision.boards import Board
@@ -109,6 +109,10 @@ class HeadMarker:
     offset_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
+#: A mid-grey deck, dark ink, a slight blur and some sensor noise.
+DECK_CAMERA_LOOK = GreyLook(ground=150.0, ink=25.0, blur_sigma=0.8, noise_sigma=2.0)
+
+
 class SceneCamera:
     """A camera over the deck that renders what it would see, on every ``capture()``.
 
@@ -116,7 +120,8 @@ class SceneCamera:
     lies) and, when a ``head_position`` source is given (e.g. ``lambda: gantry.position`` of
     :class:`labauto.drivers.grbl_sim.SimulatedGantry`), the tool head's marker where the head
     really is at that moment. Exact geometry through the camera model (lens distortion
-    included), then blur and noise.
+    included), then blur and noise. ``look`` gives the deck's grey level (its ground), the
+    ink, blur and noise; ``paper`` is the grey of the boards and of the head marker's quiet zone.
     """
 
     def __init__(
@@ -126,28 +131,24 @@ class SceneCamera:
         head_position: Callable[[], Sequence[float]] | None = None,
         head_marker: HeadMarker | None = None,
         sheets: Sequence[tuple[Board, Sequence[float], float]] = (),
-        deck_level: float = 150.0,
+        look: GreyLook = DECK_CAMERA_LOOK,
         paper: float = 225.0,
-        ink: float = 25.0,
-        blur_sigma: float = 0.8,
-        noise_sigma: float = 2.0,
         seed: int = 0,
     ) -> None:
         self.model = model
         self.head_position = head_position
         self.head_marker = head_marker
         self.sheets = list(sheets)
-        self.deck_level, self.paper, self.ink = deck_level, paper, ink
-        self.blur_sigma, self.noise_sigma = blur_sigma, noise_sigma
+        self.look, self.paper = look, paper
         self._rng = np.random.default_rng(seed)
 
     def capture(self) -> np.ndarray:
         """One grey uint8 frame of the scene as it is now."""
-        width, height = self.model.image_size
-        img = np.full((height, width), float(self.deck_level))
+        img = self.look.canvas(self.model.image_size)
+        ink = self.look.ink
         for board, origin, angle in self.sheets:
             to_image = self.model.sheet_map(origin, angle)
-            draw_board(img, board, to_image, paper=self.paper, ink=self.ink)
+            draw_board(img, board, to_image, paper=self.paper, ink=ink)
         if self.head_position is not None and self.head_marker is not None:
             x, y, z = (float(v) for v in self.head_position())
             m = self.head_marker
@@ -156,8 +157,8 @@ class SceneCamera:
             to_image = self.model.sheet_map((x + dx - q, y + dy + q, z + dz))
             quiet = disc_polygon((q, q), q, 512)
             fill_polygons(img, [to_image(quiet)], self.paper)
-            draw_marker(img, m.marker_id, (q, q), m.radius_mm, to_image=to_image, ink=self.ink)
-        return finish(img, blur_sigma=self.blur_sigma, noise_sigma=self.noise_sigma, rng=self._rng)
+            draw_marker(img, m.marker_id, (q, q), m.radius_mm, to_image=to_image, ink=ink)
+        return self.look.develop(img, self._rng)
 
     def __iter__(self) -> Iterator[tuple[str, np.ndarray]]:
         """The ``Camera`` shape: one frame, named by the head's position."""

@@ -14,9 +14,13 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from labauto.synthetic.markers import PlaneToImage, draw_marker, finish, homography_map
+from labauto.synthetic.grey_look import GreyLook
+from labauto.synthetic.markers import PlaneToImage, draw_marker, homography_map
 
-__all__ = ["SimulatedHeadCamera", "deck_to_image"]
+__all__ = ["HEAD_CAMERA_LOOK", "SimulatedHeadCamera", "deck_to_image"]
+
+#: The deck, the marker's ink, a slight blur and some sensor noise.
+HEAD_CAMERA_LOOK = GreyLook(ground=215.0, ink=25.0, blur_sigma=0.6, noise_sigma=1.0)
 
 
 def deck_to_image(pixel_to_deck: np.ndarray) -> PlaneToImage:
@@ -39,10 +43,8 @@ class SimulatedHeadCamera:
         Radius of the marker's centre circle on the head (the marker is 7.2 radii across).
     size : (width, height)
         Image size, pixels.
-    deck_grey, ink : float
-        Grey levels of the deck around the marker and of the ink.
-    noise_sigma : float
-        Sensor noise (grey levels).
+    look : GreyLook
+        Grey levels of the deck around the marker and of the ink, blur and sensor noise.
     seed : int
         Of the noise.
     """
@@ -55,9 +57,7 @@ class SimulatedHeadCamera:
         radius_mm: float = 1.0,
         *,
         size: tuple[int, int] = (1280, 1024),
-        deck_grey: float = 215.0,
-        ink: float = 25.0,
-        noise_sigma: float = 1.0,
+        look: GreyLook = HEAD_CAMERA_LOOK,
         seed: int = 0,
     ) -> None:
         self.position = position
@@ -65,19 +65,15 @@ class SimulatedHeadCamera:
         self.marker_id = int(marker_id)
         self.radius_mm = float(radius_mm)
         self.size = size
-        self.deck_grey = float(deck_grey)
-        self.ink = float(ink)
-        self.noise_sigma = float(noise_sigma)
+        self.look = look
         self._rng = np.random.default_rng(seed)
         self.captures = 0
 
     def capture(self) -> np.ndarray:
         """A grey ``uint8`` image of the deck with the head's marker where the head is."""
-        width, height = self.size
-        image = np.full((height, width), self.deck_grey)
+        image = self.look.canvas(self.size)
         x, y = (float(v) for v in self.position()[:2])
-        draw_marker(
-            image, self.marker_id, (x, y), self.radius_mm, to_image=self.to_image, ink=self.ink
-        )
+        ink = self.look.ink
+        draw_marker(image, self.marker_id, (x, y), self.radius_mm, to_image=self.to_image, ink=ink)
         self.captures += 1
-        return finish(image, blur_sigma=0.6, noise_sigma=self.noise_sigma, rng=self._rng)
+        return self.look.develop(image, self._rng)

@@ -18,7 +18,8 @@ import cv2
 import numpy as np
 
 from labauto.synthetic import shapes
-from labauto.synthetic.markers import draw_marker, fill_polygons, finish, homography_map
+from labauto.synthetic.grey_look import GreyLook
+from labauto.synthetic.markers import draw_marker, fill_polygons, homography_map
 from labauto.vision.marker_codes import QUIET_RADIUS, n_codes
 
 #: Draws a marker of some id under a homography into a float image; returns its true centre.
@@ -119,7 +120,8 @@ def marker_scene(
     plane's unit is one centre radius, the marker spanning +-3.6 units) and returns its true
     centre, e.g. an ArUco marker for a benchmark; by default our coded marker is drawn.
     """
-    img = np.full((height, width), float(paper))
+    look = GreyLook(paper, ink, blur_sigma, noise_sigma)
+    img = look.canvas((width, height))
     placed: list[tuple[float, float, float]] = []
     truth: list[SceneMarker] = []
     ids = rng.choice(n_codes(), size=n_markers, replace=False)
@@ -160,7 +162,7 @@ def marker_scene(
     for shape in others:
         fill_polygons(img, [shape.vertices], ink)
     img *= _light(rng, width, height, light_gain)
-    return finish(img, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng), truth
+    return look.develop(img, rng), truth
 
 
 def _light(

@@ -27,7 +27,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from labauto.synthetic.markers import PlaneToImage, camera_map, draw_marker, finish
+from labauto.synthetic.grey_look import GreyLook
+from labauto.synthetic.markers import PlaneToImage, camera_map, draw_marker
 from labauto.vision.marker_codes import QUIET_RADIUS, RING_OUTER
 
 __all__ = ["SequenceFrame", "SequenceSpec", "board_points", "render_sequence"]
@@ -63,6 +64,11 @@ class SequenceSpec:
         """The camera's intrinsics."""
         f = self.focal_px
         return np.array([[f, 0, self.width / 2 - 0.5], [0, f, self.height / 2 - 0.5], [0, 0, 1.0]])
+
+    @property
+    def look(self) -> GreyLook:
+        """Paper, ink and noise of the frames (motion blur is the sequence's own)."""
+        return GreyLook(self.paper, self.ink, noise_sigma=self.noise_sigma)
 
 
 @dataclass(frozen=True)
@@ -158,10 +164,11 @@ def render_sequence(
         (np.cos(np.linspace(0, 2 * np.pi, 24)), np.sin(np.linspace(0, 2 * np.pi, 24)))
     )
     xx = np.arange(spec.width)[None, :]
+    look = spec.look
     for index in range(start, start + n_frames):
         rvec, tvec = board_pose(spec, index)
         to_image = camera_map(k, d, rvec, tvec)
-        image = np.full((spec.height, spec.width), spec.paper)
+        image = look.canvas((spec.width, spec.height))
         centers: dict[int, tuple[float, float]] = {}
         extents: dict[int, np.ndarray] = {}
         for mid, (x, y, _z) in points.items():
@@ -173,9 +180,9 @@ def render_sequence(
             if hi[0] < 0 or hi[1] < 0 or lo[0] > spec.width - 1 or lo[1] > spec.height - 1:
                 continue
             if painter is None:
-                draw_marker(image, mid, (x, y), spec.radius_mm, to_image=to_image, ink=spec.ink)
+                draw_marker(image, mid, (x, y), spec.radius_mm, to_image=to_image, ink=look.ink)
             else:
-                painter(image, mid, (x, y), spec.radius_mm, to_image, spec.ink)
+                painter(image, mid, (x, y), spec.radius_mm, to_image, look.ink)
         if spec.motion_blur:
             image = _motion_blur(image, _mean_motion(spec, points, index))
         if spec.light:
@@ -196,7 +203,7 @@ def render_sequence(
                 visible.add(mid)
         yield SequenceFrame(
             index,
-            finish(image, noise_sigma=spec.noise_sigma, rng=rng),
+            look.develop(image, rng),
             centers,
             frozenset(visible),
             rvec,

@@ -118,6 +118,20 @@ def _place(local: np.ndarray, center: Sequence[float], angle_deg: float) -> np.n
     return np.column_stack((center[0] + c * x - s * y, center[1] + s * x + c * y))
 
 
+def _placed(
+    kind: str, local: np.ndarray, center: Sequence[float], angle: float, params: dict
+) -> Shape:
+    """A ``kind`` shape of ``local`` vertices turned ``angle`` degrees and moved to ``center``.
+
+    Its parameters are ``center`` (as floats) followed by ``params`` (the shape's own, in order).
+    """
+    return Shape(
+        kind,
+        _place(local, center, angle),
+        {"center": [float(center[0]), float(center[1])], **params},
+    )
+
+
 def _polar(radius: np.ndarray, theta: np.ndarray) -> np.ndarray:
     return np.column_stack((radius * np.cos(theta), radius * np.sin(theta)))
 
@@ -128,8 +142,7 @@ def ellipse(center: Sequence[float], axes: Sequence[float], angle: float = 0.0) 
     n = _n_curve_vertices(max(a, b))
     t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
     local = np.column_stack((a * np.cos(t), b * np.sin(t)))
-    params = {"center": [float(center[0]), float(center[1])], "axes": [a, b], "angle": angle}
-    return Shape("ellipse", _place(local, center, angle), params)
+    return _placed("ellipse", local, center, angle, {"axes": [a, b], "angle": angle})
 
 
 def regular_polygon(
@@ -138,26 +151,16 @@ def regular_polygon(
     """Regular polygon with circumradius ``radius`` (a triangle for 3 sides, a square for 4)."""
     t = np.arange(n_sides) * 2.0 * np.pi / n_sides
     local = _polar(np.full(n_sides, float(radius)), t)
-    params = {
-        "center": [float(center[0]), float(center[1])],
-        "radius": float(radius),
-        "n_sides": int(n_sides),
-        "angle": angle,
-    }
-    return Shape("polygon", _place(local, center, angle), params)
+    params = {"radius": float(radius), "n_sides": int(n_sides), "angle": angle}
+    return _placed("polygon", local, center, angle, params)
 
 
 def rectangle(center: Sequence[float], width: float, height: float, angle: float = 0.0) -> Shape:
     """Rectangle ``width`` x ``height`` (full side lengths) turned ``angle`` degrees."""
     w, h = float(width) / 2.0, float(height) / 2.0
     local = np.array([[-w, -h], [w, -h], [w, h], [-w, h]])
-    params = {
-        "center": [float(center[0]), float(center[1])],
-        "width": float(width),
-        "height": float(height),
-        "angle": angle,
-    }
-    return Shape("polygon", _place(local, center, angle), params)
+    params = {"width": float(width), "height": float(height), "angle": angle}
+    return _placed("polygon", local, center, angle, params)
 
 
 def square(center: Sequence[float], side: float, angle: float = 0.0) -> Shape:
@@ -182,13 +185,12 @@ def star(
     r = np.where(k % 2 == 0, float(outer_radius), float(inner_radius))
     local = _polar(r, k * np.pi / n_points)
     params = {
-        "center": [float(center[0]), float(center[1])],
         "outer_radius": float(outer_radius),
         "inner_radius": float(inner_radius),
         "n_points": int(n_points),
         "angle": angle,
     }
-    return Shape("star", _place(local, center, angle), params)
+    return _placed("star", local, center, angle, params)
 
 
 def line(p0: Sequence[float], p1: Sequence[float], width: float = 2.0) -> Shape:
@@ -228,14 +230,8 @@ def crescent(
     inner_t = np.linspace(np.pi + psi, np.pi - psi, n)[1:-1]  # back inside, reverse direction
     inner = _polar(np.full(inner_t.size, q), inner_t) + np.array([d, 0.0])
     local = np.vstack((outer, inner))
-    params = {
-        "center": [float(center[0]), float(center[1])],
-        "radius": r,
-        "inner_radius": q,
-        "offset": d,
-        "angle": angle,
-    }
-    return Shape("crescent", _place(local, center, angle), params)
+    params = {"radius": r, "inner_radius": q, "offset": d, "angle": angle}
+    return _placed("crescent", local, center, angle, params)
 
 
 def deformed_ellipse(
@@ -258,12 +254,11 @@ def deformed_ellipse(
         mod += amp * np.cos(k * t + phase)
     local = _polar(r_ell * mod, t)
     params = {
-        "center": [float(center[0]), float(center[1])],
         "axes": [a, b],
         "angle": angle,
         "harmonics": [[int(k), float(amp), float(ph)] for k, amp, ph in harmonics],
     }
-    return Shape("des", _place(local, center, angle), params)
+    return _placed("des", local, center, angle, params)
 
 
 # ----------------------------------------------------------------------------------- rendering

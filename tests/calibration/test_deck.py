@@ -12,7 +12,6 @@ from labauto.config import parse_config
 from labauto.errors import CalibrationError
 from labauto.orchestrator.calibration import Calibration, stored_deck_calibration
 from labauto.store import Store
-from labauto.store.calibrations import save_calibration
 from labauto.synthetic.camera import CameraModel, HeadMarker, SceneCamera
 from labauto.vision.board_points import find_board_points
 from labauto.vision.boards import coded_board
@@ -104,7 +103,7 @@ def _config(tmp_path, **deck) -> object:
 def _store_camera(store) -> None:
     doc = {"camera_matrix": K.tolist(), "dist_coeffs": D.tolist(), "image_size": list(SIZE),
            "rms_px": 0.01}  # fmt: skip
-    save_calibration(store.engine, "cam", "camera", doc)
+    store.save_calibration("cam", "camera", doc)
 
 
 def test_simulated_gantry_carries_the_marker_and_runs_use_the_result(tmp_path) -> None:
@@ -114,14 +113,14 @@ def test_simulated_gantry_carries_the_marker_and_runs_use_the_result(tmp_path) -
         cal, report = calibrate_deck(config, store)
         assert len(report["positions"]) == 12 and all(p["pixel"] for p in report["positions"])
         assert cal.residual_mm < 0.01
-        save_calibration(store.engine, "deck", "deck", cal.to_dict(), cal.residual_mm)
+        store.save_calibration("deck", "deck", cal.to_dict(), cal.residual_mm)
         used = stored_deck_calibration(config, store)
         assert isinstance(used, DeckCalibration)
         pixels, deck = _surface_truth()
         assert np.abs(used.to_deck(pixels) - deck).max() < 0.01
         # a stored calibration over the limit is refused, not used
         bad = {**cal.to_dict(), "residual_mm": 0.9}
-        save_calibration(store.engine, "deck", "deck", bad, 0.9)
+        store.save_calibration("deck", "deck", bad, 0.9)
         with pytest.raises(CalibrationError, match=r"residual of 0\.900 mm, over the limit"):
             stored_deck_calibration(config, store)
 
@@ -132,6 +131,19 @@ def test_without_a_camera_calibration_the_deck_is_refused_in_one_line(tmp_path) 
         calibrate_deck(config, store)
     assert "no stored camera calibration named 'cam'" in str(err.value)
     assert "\n" not in str(err.value)
+
+
+def test_a_stored_deck_calibration_that_cannot_be_read_is_refused_in_one_line(tmp_path) -> None:
+    config = _config(tmp_path)
+    with Store.open(config.database.url) as store:
+        _store_camera(store)
+        camera = store.latest_calibration("cam", "camera")
+        store.save_calibration("deck", "deck", camera.data, 0.001)  # a camera document, no pose
+        with pytest.raises(CalibrationError) as err:
+            stored_deck_calibration(config, store)
+    message = str(err.value)
+    assert "stored deck calibration 'deck' (id 2) cannot be read (no 'rvec')" in message
+    assert "labauto calibrate deck" in message and "\n" not in message
 
 
 def test_a_marker_out_of_view_is_reported(tmp_path) -> None:

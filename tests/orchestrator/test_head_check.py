@@ -105,7 +105,6 @@ def test_with_a_stored_deck_calibration_the_camera_model_sees_the_head_without_p
 ):
     """A run on issue 14's camera-model deck calibration: its simulated camera over the deck,
     the head marker of ``calibration.deck.head_marker``, the pixel cast onto safe height."""
-    from labauto.store.calibrations import save_calibration
     from labauto.synthetic.camera import CameraModel
     from labauto.vision.deck import DeckCalibration
 
@@ -122,7 +121,7 @@ def test_with_a_stored_deck_calibration_the_camera_model_sees_the_head_without_p
         config.robot.pick_z_mm, 0.0, 0.0, 12, model.image_size,
     )  # fmt: skip
     store = Store.open(config.database.url)
-    save_calibration(store.engine, "deck", "deck", truth.to_dict(), 0.0)
+    store.save_calibration("deck", "deck", truth.to_dict(), 0.0)
     recorder = Recorder()
     gantry_box = {}
     recorder.when(
