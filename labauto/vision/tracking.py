@@ -308,7 +308,9 @@ class MarkerTracker:
                 windows[track.id] = rect
         if not windows:
             return {}
-        observed, pixels = self.search.in_windows(frame, windows.values())
+        observed, pixels = self.search.in_windows(
+            frame, windows.values(), self.windows.extent_factor
+        )
         self.stats.window_pixels.append(pixels)
         return association.associate(observed, read_codes, windows=windows)
 

@@ -20,10 +20,10 @@ import numpy as np
 from labauto.vision.marker_candidates import centre_candidates, read_markers_at
 from labauto.vision.marker_codes import QUIET_RADIUS
 from labauto.vision.markers import MarkerParams
-from labauto.vision.roi_mosaic import Rect, build_mosaic, merge_overlapping
+from labauto.vision.roi_mosaic import Rect, build_mosaic, clip_rect, merge_overlapping
 from labauto.vision.tracking_types import MarkerLike
 
-__all__ = ["Detect", "MarkerSearch", "Obs"]
+__all__ = ["Detect", "MarkerSearch", "Obs", "holds"]
 
 #: A detector: ``detect(image) -> markers`` (see :class:`~labauto.vision.tracking_types.
 #: MarkerLike`); it must work on any sub-image.
@@ -86,21 +86,58 @@ class MarkerSearch:
             ]
         return present(self.coded(marker) for marker in self.detect(image))
 
-    def in_windows(self, frame: np.ndarray, windows: Iterable[Rect]) -> tuple[list[Obs], int]:
+    def in_windows(
+        self, frame: np.ndarray, windows: Iterable[Rect], extent_factor: float
+    ) -> tuple[list[Obs], int]:
         """Observations in ``windows`` of ``frame`` (frame pixels) and the mosaic's pixels.
 
         Overlapping windows are merged, all are packed into one mosaic and searched at once;
-        what lies in a tile's padding (a piece of an object cut by its window) is dropped.
+        what lies in a tile's padding (a piece of an object cut by its window) is dropped. A
+        coded marker whose window does not hold ``extent_factor`` of its centre radii around
+        it (it moved further than its window allowed for, so its code ring and quiet zone run
+        into the tile's padding and its ring fits are off) is searched again, once, in a
+        window of its own (:meth:`around`); there is no such limit at the frame's border, as
+        in a full-frame search.
         """
-        mosaic = build_mosaic(frame, merge_overlapping(list(windows)))
+        observed, cut, pixels = self._in_mosaic(frame, list(windows), extent_factor)
+        if cut:
+            again = [w for w in (self.around(c, extent_factor, frame.shape) for c in cut) if w]
+            more, _, extra = self._in_mosaic(frame, again, extent_factor)
+            ids = {c.id for c in cut}
+            observed += [o for o in more if o.id in ids]
+            pixels += extra
+        return observed, pixels
+
+    def _in_mosaic(
+        self, frame: np.ndarray, windows: list[Rect], extent_factor: float
+    ) -> tuple[list[Obs], list[Obs], int]:
+        """Observations held by their windows, coded ones cut by them, and the mosaic's pixels."""
+        if not windows:
+            return [], [], 0
+        mosaic = build_mosaic(frame, merge_overlapping(windows))
         inside = self.observe(mosaic.image)
         tiles = mosaic.owners(np.array([o.position for o in inside]).reshape(-1, 2))
-        observed = [
-            Obs(o.id, o.position - mosaic.offsets[t], o.radius, o.whole)
-            for o, t in zip(inside, tiles.tolist(), strict=True)
-            if t >= 0
-        ]
-        return observed, int(mosaic.image.shape[0] * mosaic.image.shape[1])
+        height, width = frame.shape[:2]
+        observed: list[Obs] = []
+        cut: list[Obs] = []
+        for o, t in zip(inside, tiles.tolist(), strict=True):
+            if t < 0:
+                continue
+            obs = Obs(o.id, o.position - mosaic.offsets[t], o.radius, o.whole)
+            held = o.id is None or holds(
+                mosaic.rects[t], obs.position, extent_factor * obs.radius, width, height
+            )
+            (observed if held else cut).append(obs)
+        return observed, cut, int(mosaic.image.shape[0] * mosaic.image.shape[1])
+
+    @staticmethod
+    def around(obs: Obs, extent_factor: float, shape: tuple[int, ...]) -> Rect | None:
+        """A window centred on ``obs`` holding its extent with room to spare (clipped)."""
+        half = 1.3 * extent_factor * obs.radius + 4.0
+        x, y = float(obs.position[0]), float(obs.position[1])
+        rect = (math.floor(x - half), math.floor(y - half), math.ceil(x + half) + 1,
+                math.ceil(y + half) + 1)  # fmt: skip
+        return clip_rect(rect, shape[1], shape[0])
 
     def read_codes(self, frame: np.ndarray, candidates: list[Obs]) -> list[Obs]:
         """The coded markers at ``candidates`` of ``frame`` (the whole detector, frame pixels)."""
@@ -140,6 +177,19 @@ class MarkerSearch:
             ):  # a perspective correction larger than any perspective bias: not trusted
                 point = centre
         return Obs(int(marker.id), np.array([float(point[0]), float(point[1])]), radius)
+
+
+def holds(rect: Rect, point: np.ndarray, reach: float, width: int, height: int) -> bool:
+    """True when ``rect`` holds the disc of radius ``reach`` about ``point`` in a frame of
+    ``width`` x ``height`` pixels (a side of ``rect`` on the frame's border holds anything)."""
+    x0, y0, x1, y1 = rect
+    x, y = float(point[0]), float(point[1])
+    return (
+        (x0 == 0 or x - reach >= x0 - 0.5)
+        and (y0 == 0 or y - reach >= y0 - 0.5)
+        and (x1 == width or x + reach <= x1 - 0.5)
+        and (y1 == height or y + reach <= y1 - 0.5)
+    )
 
 
 def present(observations: Iterable[Obs | None]) -> list[Obs]:
