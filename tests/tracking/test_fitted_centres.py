@@ -78,7 +78,7 @@ def test_fitted_centres_are_unbiased_under_motion_blur(smear):
     """Motion blur (a symmetric smear) widens the edges across the motion beyond the edge
     windows' +-3 px; cut, their profiles pulled the centre toward the first (Canny) fit's,
     0.08-0.1 px off along the motion. Rays with a wide edge are measured again in a wider
-    window (``marker_edges.WIDTH_SPAN``)."""
+    window (``marker_edges.PLATEAU_SHARE``)."""
     rng = np.random.default_rng(8)
     truth = {
         4 * r + c: (110.3 + 140 * c + 0.37 * r, 100.6 + 140 * r + 0.21 * c)
