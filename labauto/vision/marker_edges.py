@@ -52,7 +52,7 @@ MIN_STEP_SHARE = 0.5
 #: A ray's profile is flat at its ends when the three samples inside each end's three differ
 #: from them by at most this share of the step (both ends together); else the window cuts the
 #: edge and is widened, for the next pass, to the limit the neighbouring circle sets.
-PLATEAU_SHARE = 0.1
+PLATEAU_SHARE = 0.2
 #: A pass whose edges lay this close (mean, px) to its windows' centres is the last one.
 CENTRED_PX = 0.08
 #: A circle's fit is used with at least this many points and at most this rms (px).
