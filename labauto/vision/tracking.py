@@ -27,7 +27,11 @@ Window size
     yet; its allowance is ``initial_speed_px`` per frame in full (it may move that fast in any
     direction). Windows are clipped to the frame; windows that overlap are merged into one; all
     of them are packed into one mosaic and the detector runs once
-    (:mod:`labauto.vision.roi_mosaic`).
+    (:mod:`labauto.vision.roi_mosaic`). A coded marker found beyond its allowance, so that its
+    window does not hold its extent (its code ring runs into the mosaic's padding and the ring
+    fits behind the fitted centre are off, by 0.1 px and more), is searched again in a window
+    of its own before it is taken (:meth:`~labauto.vision.tracking_search.MarkerSearch.
+    in_windows`).
 Full-frame search
     On the first frame, every ``full_interval`` frames (so markers entering the view are picked
     up within ``full_interval`` frames: a marker that re-enters is reported in the next
@@ -195,7 +199,7 @@ class MarkerTracker:
         self.full_interval = int(full_interval)
         self.coast_frames = int(coast_frames)
         self.gate_factor = float(gate_factor)
-        self.windows = WindowModel(
+        self.window_model = WindowModel(
             extent_factor=float(extent_factor),
             margin_px=float(margin_px),
             speed_gain=float(speed_gain),
@@ -225,7 +229,7 @@ class MarkerTracker:
     @property
     def extent_factor(self) -> float:
         """What of a marker a window holds, in centre radii."""
-        return self.windows.extent_factor
+        return self.window_model.extent_factor
 
     def reset(self) -> None:
         """Forget every track (the next frame is searched whole)."""
@@ -243,7 +247,7 @@ class MarkerTracker:
     def predicted(self) -> dict[int, tuple[float, float]]:
         """Where each track expects its marker in the next frame."""
         return {
-            tid: tuple(self.windows.predict(t, self._frame))  # type: ignore[misc]
+            tid: tuple(self.window_model.predict(t, self._frame))  # type: ignore[misc]
             for tid, t in self._tracks.items()
         }
 
@@ -290,7 +294,12 @@ class MarkerTracker:
     def _search_frame(self, frame: np.ndarray, *, full: bool) -> dict[int, Obs]:
         """Search the whole frame or the windows of the tracks; the markers found by id."""
         association = Association(
-            self._tracks, self._frame, self.windows, self.coast_frames, self.gate_factor, self.stats
+            self._tracks,
+            self._frame,
+            self.window_model,
+            self.coast_frames,
+            self.gate_factor,
+            self.stats,
         )
 
         def read_codes(candidates: list[Obs]) -> list[Obs]:
@@ -303,13 +312,13 @@ class MarkerTracker:
         height, width = frame.shape[:2]
         windows: dict[int, Rect] = {}
         for track in self._tracks.values():
-            rect = clip_rect(self.windows.window(track, self._frame), width, height)
+            rect = clip_rect(self.window_model.window(track, self._frame), width, height)
             if rect is not None:
                 windows[track.id] = rect
         if not windows:
             return {}
         observed, pixels = self.search.in_windows(
-            frame, windows.values(), self.windows.extent_factor
+            frame, windows.values(), self.window_model.extent_factor
         )
         self.stats.window_pixels.append(pixels)
         return association.associate(observed, read_codes, windows=windows)
