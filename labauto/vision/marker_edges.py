@@ -11,7 +11,10 @@ for more, so once a marker is read its three circles are measured again, along r
   middle half of every ink sector of the code ring for its inner (2) and outer (3) edges, so the
   sector ends, whose corners are rounded by blur, are never used;
 * along each ray the image is sampled (bilinear) every 0.25 px over a window of +-3 px about the
-  expected edge (less where the neighbouring edge is closer);
+  expected edge (less where the neighbouring edge is closer); a ray whose profile is not flat
+  at its ends (``PLATEAU_SHARE``: the window cuts an edge widened by motion blur across it) is
+  measured again in the widest window the neighbouring circle leaves (0.45 of the ray's
+  radius), as a cut profile pulls the edge toward the window's centre (the previous fit);
 * the edge is where the profile's area says it is (the moment method): with the profile
   normalised from 0 at the window's start to 1 at its end (each end the mean of its first or
   last three samples), the step lies ``sum((1 - n_i) * ds)`` after the window's start. For a
@@ -46,6 +49,10 @@ WINDOW_PX = 3.0
 STEP_PX = 0.25
 #: A ray is used when the ends of its profile differ by at least this share of the contrast.
 MIN_STEP_SHARE = 0.5
+#: A ray's profile is flat at its ends when the three samples inside each end's three differ
+#: from them by at most this share of the step (both ends together); else the window cuts the
+#: edge and is widened, for the next pass, to the limit the neighbouring circle sets.
+PLATEAU_SHARE = 0.2
 #: A pass whose edges lay this close (mean, px) to its windows' centres is the last one.
 CENTRED_PX = 0.08
 #: A circle's fit is used with at least this many points and at most this rms (px).
@@ -155,17 +162,21 @@ def refine_circles(
     # directions from each new fit could turn the ring's rays onto the sector ends.)
     direction = np.einsum("kij,kj->ki", centre_maps[owner], unit)
     reach = np.hypot(direction[:, 0], direction[:, 1])
-    # the window stays clear of the neighbouring circle (one centre radius away)
-    half = np.minimum(WINDOW_PX, 0.45 * reach)
+    # the window stays clear of the neighbouring circle (one centre radius away); a ray whose
+    # edge is wider than its window holds (motion blur across it) gets the widest one
+    limit = 0.45 * reach
+    half = np.minimum(WINDOW_PX, limit)
     key = owner * 3 + which
     result = np.full((k, 3, 5), np.nan)  # NaN rows: no fit
     active = np.ones(k, bool)
     for _ in range(max_passes):
         centres, maps = _row_frames(guess.reshape(-1, 5))
         live = active[owner]
-        edge, usable, offset = _measure(
+        edge, usable, offset, cut = _measure(
             grey, centres[key[live]], maps[key[live]], direction[live], half[live], min_contrast
         )
+        wide = usable & cut & (half[live] < limit[live])
+        half[np.flatnonzero(live)[wide]] = limit[live][wide]
         fits = _fit_sets(guess, edge, key[live], usable)
         todo = np.flatnonzero(active)
         now, before = _centres(fits[todo]), _centres(result[todo])
@@ -177,6 +188,7 @@ def refine_circles(
         # done when the windows sat on their edges (another pass would measure the same) or the
         # centre stopped moving; no centre yet (NaN): nothing more to gain
         active[todo] = np.isfinite(now).all(axis=1) & ~centred & ~(moved <= tol_px)
+        active[np.unique(owner[live][wide])] = True  # measure again in the wider windows
         if not active.any():
             break
     return [
@@ -217,9 +229,10 @@ def _measure(
     direction: np.ndarray,
     half: np.ndarray,
     min_contrast: float,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Edge point along every ray ``centre + s * direction`` near the ellipse ``(centre, map)``,
-    whether it is usable, and its offset (px) from the window's centre."""
+    whether it is usable, its offset (px) from the window's centre, and whether the window cuts
+    the edge (the profile is not flat at its ends, ``PLATEAU_SHARE``)."""
     n_samples = round(2 * WINDOW_PX / STEP_PX)
     grid = ((np.arange(n_samples) + 0.5) / n_samples * 2.0 - 1.0).astype(np.float32)
     # expected crossing: |map^-1 (s0 direction)| = 1
@@ -250,7 +263,9 @@ def _measure(
     edge_px = -half + ones * (2.0 * half / n_samples)
     usable &= np.abs(edge_px) < half
     edge = centres + (s0 + edge_px / px_per_unit)[:, None] * direction
-    return edge, usable, edge_px
+    ramp = np.abs(prof[:, 3:6].mean(axis=1) - start) + np.abs(end - prof[:, -6:-3].mean(axis=1))
+    cut = ramp > PLATEAU_SHARE * np.abs(step)
+    return edge, usable, edge_px, cut
 
 
 def _windows_centred(

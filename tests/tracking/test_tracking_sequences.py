@@ -75,3 +75,11 @@ def test_fitted_centres_are_within_a_tenth_of_a_pixel(still_sequence):
     score = score_tracking(results, frames)
     assert score.swaps == 0 and score.reported_rate == 1.0
     assert score.error(95) <= 0.1 and score.error(50) < 0.05
+
+
+def test_fitted_centres_are_within_a_tenth_of_a_pixel_under_blur_and_occlusion(hard_sequence):
+    tracker = MarkerTracker(fit=True)
+    results = [tracker.update(frame.image) for frame in hard_sequence]
+    score = score_tracking(results, hard_sequence)
+    assert score.swaps == 0 and score.tracked_rate >= 0.995
+    assert score.error(100) <= 0.1 and score.error(99) <= 0.05
