@@ -48,7 +48,7 @@ def ink_bodies(
     ----------
     roi, background : ndarray
         The plate's BGR pixels and the agar's colour behind them (same shape).
-    bodies : labauto.vision.plate._Bodies
+    bodies : labauto.vision.plate_bodies.Bodies
         The measured bodies (crops on a shared canvas: ``top``, ``left``, ``height``,
         ``width``, ``row``, ``mask``, ``area``, ``r_in``).
     which : ndarray of bool

@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 if TYPE_CHECKING:
-    from labauto.vision.plate import PlateParams
+    from labauto.vision.plate_params import PlateParams
 
 
 @dataclass(frozen=True)

@@ -15,10 +15,11 @@ import pytest
 
 from labauto.vision import dish as dish_module
 from labauto.vision import plate as plate_module
+from labauto.vision import plate_bodies
 from labauto.vision.plate import PlateParams, analyze_plate
 from labauto.vision.plate_background import deviation
 
-PAD = plate_module._PAD
+PAD = plate_bodies.PAD
 DISC5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
 
 
@@ -74,7 +75,7 @@ def _reference_merged_count(dt: np.ndarray, valley_ratio: float) -> int:
                 break
         if separate:
             kept.append((px, py, pv))
-    return max(plate_module._MIN_MERGED_COUNT, len(kept))
+    return max(plate_bodies.MIN_MERGED_COUNT, len(kept))
 
 
 def _reference_mix_score(roi: np.ndarray, body: dict, params: PlateParams) -> float:
@@ -111,7 +112,7 @@ def stages(plates: list) -> list[tuple]:
             roi, usable, params, plate_module._background(roi, usable, params)
         )
         des_shape = np.asarray(inside, bool) & (d_alpha < params.des_threshold_deg)
-        bodies = plate_module._measure_bodies(contours, fg, des_shape, params, rejected)
+        bodies = plate_bodies.measure_bodies(contours, fg, des_shape, params, rejected)
         out.append((roi, contours, fg, des_shape, bodies, params))
     return out
 
@@ -138,8 +139,8 @@ def test_canvas_measures_equal_per_crop_measures(stages: list) -> None:
 def test_vectorised_mix_scores_and_merged_counts_equal_per_body(stages: list) -> None:
     for roi, contours, fg, _, bodies, params in stages:
         everyone = ~bodies.stroke
-        scores = plate_module._mix_scores(roi, bodies, everyone, params)
-        counts = plate_module._merged_counts(bodies, everyone, params.valley_ratio)
+        scores = plate_bodies.mix_scores(roi, bodies, everyone, params)
+        counts = plate_bodies.merged_counts(bodies, everyone, params.valley_ratio)
         for b, k in enumerate(bodies.index):
             if not everyone[b]:
                 assert scores[b] == 0.0 and counts[b] == 1

@@ -1,0 +1,313 @@
+"""The bodies of a plate: artefact tests, waists, mixed-colony scores and merged counts.
+
+Steps 3-5 of :mod:`labauto.vision.plate` (its docstring gives the rules): every object that
+passes the contour's moment tests becomes a body whose mask lies on one shared canvas
+(:class:`Bodies`), so each measure is one OpenCV or numpy call over all bodies.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from labauto.vision.plate_params import PlateParams
+
+MIN_MERGED_COUNT = 1  # a body that is not a DES but shows one peak: one colony, not pickable
+PAD = 3  # margin (px) around a body's mask; bodies this close to the usable border are dropped
+_DISC5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+_GAP = 2  # empty canvas rows between two bodies' crops (the 5x5 filters reach 2 px)
+
+
+@dataclass
+class Bodies:
+    """The objects that passed the moment tests, with their masks on one shared canvas.
+
+    Every body's crop (its bounding box grown by ``PAD`` on every side) is copied to the
+    canvas at column 0 and an even row, below the previous one with ``_GAP`` empty rows
+    between them. No canvas row holds two bodies, so one OpenCV call (closing, distance
+    transform, dilation, connected components) treats all bodies at once and gives, inside
+    every crop, exactly what it gives on the crop alone (the crop's rim of ``PAD`` px and the
+    gap rows are background), and a per-body reduction is a reduction over a range of rows.
+
+    Attributes
+    ----------
+    index : ndarray of int
+        Contour index of each body.
+    top, left : ndarray of int
+        The crop's origin (ROI pixels).
+    height, width : ndarray of int
+        The crop's size.
+    row : ndarray of int
+        The canvas row of the crop's first row (even).
+    row_body : ndarray of int
+        The body of every canvas row, -1 in the gaps.
+    mask : ndarray of uint8
+        Canvas of the bodies' masks (0 or 1).
+    dt : ndarray of float32
+        Their distance transform (3x3 L2 chamfer).
+    area : ndarray of float
+        Pixels in each body's mask.
+    r_in : ndarray of float
+        Largest inscribed radius (``dt``'s maximum in each crop).
+    stroke : ndarray of bool
+        Area above ``max_fill_ratio`` inscribed discs: a pen stroke (artefact).
+    concavity : ndarray of float
+        Depth of the deepest concavity over ``r_in`` (``inf`` where not measured).
+    elongation : ndarray of float
+        Axis ratio ``sqrt(l1 / l2)`` of the contour's second moments.
+    """
+
+    index: np.ndarray
+    top: np.ndarray
+    left: np.ndarray
+    height: np.ndarray
+    width: np.ndarray
+    row: np.ndarray
+    row_body: np.ndarray
+    mask: np.ndarray
+    dt: np.ndarray
+    area: np.ndarray
+    r_in: np.ndarray
+    stroke: np.ndarray
+    concavity: np.ndarray
+    elongation: np.ndarray
+
+
+def moment_test(contour: np.ndarray, params: PlateParams) -> tuple[str | None, float]:
+    """Artefact tests of step 3 that need only the contour: the reject reason (or None) and
+    the elongation ``sqrt(l1 / l2)`` of the second moments."""
+    m = cv2.moments(contour)
+    mu20, mu02, mu11 = m["mu20"], m["mu02"], m["mu11"]
+    half_trace = (mu20 + mu02) / 2.0
+    spread = math.sqrt(((mu20 - mu02) / 2.0) ** 2 + mu11 * mu11)
+    elongation = math.sqrt((half_trace + spread) / max(half_trace - spread, 1e-9))
+    area = m["m00"] + len(contour) / 2.0 + 1.0  # polygon through pixel centres + half-pixel rim
+    if area < params.min_colony_area_px:
+        return "dust", elongation
+    if area > params.max_colony_area_px:
+        return "large", elongation
+    if 2.0 * area / max(cv2.arcLength(contour, True), 1.0) < params.min_width_px:
+        return "thin", elongation
+    if elongation > params.max_elongation:
+        return "elongated", elongation
+    return None, elongation
+
+
+def measure_bodies(
+    contours: list[np.ndarray],
+    fg: np.ndarray | None,
+    need_concavity: np.ndarray,
+    params: PlateParams,
+    rejected: dict[str, int],
+) -> Bodies:
+    """Artefact tests (module docstring, step 3) and waists of all contours.
+
+    Contours failing a moment test are counted in ``rejected``; the others become bodies.
+    A body's mask is its filled contour, restricted to the foreground ``fg`` (so a closed loop
+    of pen ink is not taken for a solid body) and closed with a 5x5 disc (so a crack of a pixel
+    or two where two species' colours meet at the edge does not read as a waist). Strokes are
+    flagged in ``stroke`` (and counted). The concavity (the waist test of step 4) is measured
+    only for the contours where ``need_concavity`` is true (``inf`` elsewhere): the caller
+    leaves out those that cannot be a DES anyway (centroid outside or D_alpha too large).
+    """
+    survivors, elongations = [], []
+    for k, contour in enumerate(contours):
+        reason, elongation = moment_test(contour, params)
+        if reason is None:
+            survivors.append(k)
+            elongations.append(elongation)
+        else:
+            rejected[reason] = rejected.get(reason, 0) + 1
+    index = np.array(survivors, dtype=np.intp)
+    kept = [contours[k] for k in survivors]
+    if not kept:
+        none, empty = np.zeros(0, np.intp), np.zeros(0)
+        canvas_none = np.zeros((0, 1), np.uint8)
+        return Bodies(
+            none, none, none, none, none, none, none, canvas_none,
+            canvas_none.astype(np.float32), empty, empty, empty.astype(bool), empty, empty,
+        )  # fmt: skip
+    boxes = np.array([cv2.boundingRect(c) for c in kept], np.intp).reshape(-1, 4)
+    left, top = boxes[:, 0] - PAD, boxes[:, 1] - PAD
+    width, height = boxes[:, 2] + 2 * PAD, boxes[:, 3] + 2 * PAD
+    slot = (height + _GAP + 1) // 2 * 2  # rows taken on the canvas (even)
+    row = np.cumsum(slot) - slot
+    n_rows = int(slot.sum())
+    row_body = np.repeat(np.arange(len(kept)), slot)
+    row_body[np.arange(n_rows) - row[row_body] >= height[row_body]] = -1
+    canvas = (n_rows, int(width.max(initial=1)))
+
+    # the contours moved to the canvas, all drawn (filled) at once: one body per canvas row
+    lengths = [len(c) for c in kept]
+    shift = np.stack((-left, row - top), axis=1).astype(np.int32)
+    moved = np.split(
+        np.concatenate(kept).reshape(-1, 2) + np.repeat(shift, lengths, axis=0),
+        np.cumsum(lengths)[:-1],
+    )
+    mask = np.zeros(canvas, np.uint8)
+    cv2.drawContours(mask, [c.reshape(-1, 1, 2) for c in moved], -1, 1, -1)
+    if fg is not None:
+        fg_canvas = np.zeros(canvas, np.uint8)
+        for r, t, lft, h, w in zip(row, top, left, height, width, strict=True):
+            fg_canvas[r : r + h, :w] = fg[t : t + h, lft : lft + w]
+        mask = cv2.morphologyEx(cv2.min(mask, fg_canvas), cv2.MORPH_CLOSE, _DISC5)
+    dt = cv2.distanceTransform(mask, cv2.DIST_L2, 3)
+    r_in = np.maximum.reduceat(dt.max(axis=1), row).astype(np.float64)
+    area = np.add.reduceat(np.count_nonzero(mask, axis=1), row).astype(np.float64)
+    stroke = area > params.max_fill_ratio * math.pi * r_in * r_in
+    if stroke.any():
+        rejected["stroke"] = rejected.get("stroke", 0) + int(stroke.sum())
+
+    # deepest concavity: largest distance from the hull's outline of a hull pixel not in the
+    # body (0 when there is no such pixel)
+    concavity = np.full(len(kept), math.inf)
+    wanted = need_concavity[index] & ~stroke
+    if wanted.any():
+        hulls = np.zeros(canvas, np.uint8)
+        for i in np.flatnonzero(wanted):
+            cv2.fillConvexPoly(hulls, cv2.convexHull(moved[i]), 1)
+        pocket = cv2.compare(hulls, mask, cv2.CMP_GT)
+        hull_dt = cv2.distanceTransform(hulls, cv2.DIST_L2, 3)
+        hull_dt[pocket == 0] = 0.0
+        depth = np.maximum.reduceat(hull_dt.max(axis=1), row).astype(np.float64)
+        concavity[wanted] = depth[wanted] / np.maximum(r_in[wanted], 1.0)
+    return Bodies(
+        index, top, left, height, width, row, row_body, mask, dt, area, r_in, stroke, concavity,
+        np.asarray(elongations, float),
+    )  # fmt: skip
+
+
+def mix_scores(
+    roi: np.ndarray, bodies: Bodies, which: np.ndarray, params: PlateParams
+) -> np.ndarray:
+    """Mixed-colony score of the bodies where ``which`` is true, all at once (step 4; 0 elsewhere).
+
+    Per body, the inner pixels' B, G, R are fitted by ``c0 + c1 s + c2 s^2`` with ``s`` the
+    distance to the boundary over its maximum (least squares, solved for all bodies together);
+    the score is the fraction of inner pixels farther than ``mix_residual`` from the fit. Every
+    second row and column of the body's crop is used (a speckle of 2 px radius still gives
+    samples).
+    """
+    k = len(bodies.index)
+    score = np.zeros(k)
+    # inner samples: every second row and column of the crops (crops start at even rows)
+    dt = bodies.dt[::2, ::2]
+    body_of_row = bodies.row_body[::2]
+    row_wanted = (body_of_row >= 0) & which[np.maximum(body_of_row, 0)]
+    inner = (dt >= params.edge_skip_px) & row_wanted[:, None]
+    sub_y, sub_x = np.nonzero(inner)  # body after body, each in raster order
+    label = body_of_row[sub_y]
+    crop_y, crop_x = 2 * sub_y - bodies.row[label], 2 * sub_x
+    in_crop = crop_x < bodies.width[label]
+    if not in_crop.all():  # edge_skip_px <= 0 takes in the background beside the crop
+        sub_y, sub_x, label = sub_y[in_crop], sub_x[in_crop], label[in_crop]
+        crop_y, crop_x = crop_y[in_crop], crop_x[in_crop]
+    sizes = np.bincount(label, minlength=k)
+    if sizes.sum() == 0:
+        return score
+    starts = np.cumsum(sizes) - sizes
+    c = roi[bodies.top[label] + crop_y, bodies.left[label] + crop_x].astype(np.float32)
+    depth_scale = (1.0 / np.maximum(bodies.r_in, 1e-6)).astype(np.float32)
+    s = dt[sub_y, sub_x] * depth_scale[label]  # normalised depth, 0 at the boundary
+    s2 = s * s
+    # per-body sums of every product the normal equations need, in one pass (one row per
+    # pixel; summed row after row, i.e. in pixel order, per body)
+    products = np.empty((len(s), 14))
+    products[:, 0] = 1.0
+    products[:, 1] = s
+    products[:, 2] = s2
+    products[:, 3] = s2 * s
+    products[:, 4] = s2 * s2
+    products[:, 5:8] = c  # times s ** 0
+    products[:, 8:11] = s[:, None] * c
+    products[:, 11:14] = s2[:, None] * c
+    nonempty = sizes > 0
+    sums = np.zeros((k, 14))
+    sums[nonempty] = np.add.reduceat(products, starts[nonempty], axis=0)
+    gram = np.stack([sums[:, i : i + 3] for i in range(3)], axis=1) + np.eye(3) * 1e-6
+    rhs = sums[:, 5:14].reshape(k, 3, 3)  # [body, power of s, channel]
+    coef = np.linalg.solve(gram, rhs).astype(np.float32)[label]
+    resid = c - (coef[:, 0] + s[:, None] * coef[:, 1] + s2[:, None] * coef[:, 2])
+    off = np.einsum("ij,ij->i", resid, resid) > params.mix_residual**2
+    score = np.bincount(label, off, minlength=k) / np.maximum(sizes, 1)
+    score[sizes < 8] = 0.0  # too few inner samples to judge
+    return score
+
+
+def merged_counts(bodies: Bodies, which: np.ndarray, valley_ratio: float) -> np.ndarray:
+    """Colonies in each merged body (where ``which`` is true; 1 elsewhere), all at once.
+
+    Step 5: one peak per plateau of the distance transform's local maxima (5x5), above
+    ``max(2, 0.3 r_in)``, at its highest pixel (the first in raster order on a tie); peaks are
+    taken greedily from the highest (plateaus of equal height in the order OpenCV labels a
+    crop: by their first 2x2 block in raster order), and a peak is kept when the straight
+    segment to every peak kept before it dips below ``valley_ratio`` times the lower of the
+    two. At least ``MIN_MERGED_COUNT`` (1). The segments between all pairs of peaks of a body
+    are sampled at once.
+    """
+    counts = np.ones(len(bodies.index), np.intp)
+    if not which.any():
+        return counts
+    counts[which] = MIN_MERGED_COUNT
+    # a smaller canvas of only these bodies' slots (the layout's rules still hold)
+    slot = np.diff(np.append(bodies.row, len(bodies.row_body)))
+    rows = which[np.repeat(np.arange(len(slot)), slot)]
+    dt, row_body = bodies.dt[rows], bodies.row_body[rows]
+    first_row = np.zeros(len(slot), np.intp)
+    first_row[which] = np.cumsum(slot[which]) - slot[which]
+    floor = np.maximum(2.0, 0.3 * bodies.r_in)
+    floor_of_row = np.where(row_body >= 0, floor[np.maximum(row_body, 0)], np.inf)
+    cand = (dt >= cv2.dilate(dt, _DISC5)) & (dt >= floor_of_row[:, None])
+    n, labels = cv2.connectedComponents(cand.view(np.uint8), connectivity=8)
+    if n <= 1:
+        return counts
+    ys, xs = np.nonzero(cand)  # raster order
+    plateau, value = labels[ys, xs], dt[ys, xs]
+    order = np.lexsort((-value, plateau))  # by plateau, highest first, raster order on ties
+    first = order[np.searchsorted(plateau[order], np.arange(1, n))]
+    first_block = np.full(n, np.iinfo(np.intp).max)
+    np.minimum.at(first_block, plateau, (ys // 2) * dt.shape[1] + xs // 2)
+    peaks = first[np.argsort(first_block[1:], kind="stable")]  # body after body (rows)
+    body = row_body[ys[peaks]]
+    pv = value[peaks].astype(np.float64)
+    peaks = peaks[np.lexsort((-pv, body))]  # per body, highest first (stable on ties)
+    body, pv = row_body[ys[peaks]], value[peaks].astype(np.float64)
+    px, py = xs[peaks], ys[peaks] - first_row[body]  # crop coordinates
+    # every pair (j, i) of peaks of one body with i before j
+    bounds = np.flatnonzero(np.diff(body, prepend=-1, append=-1))
+    pairs = [
+        (j, i)
+        for lo, hi in itertools.pairwise(bounds.tolist())
+        for j in range(lo + 1, hi)
+        for i in range(lo, j)
+    ]
+    if not pairs:
+        return counts
+    jj, ii = np.array(pairs, np.intp).T
+    # the segment from peak j to peak i, sampled as np.linspace(p_j, p_i, m) in crop pixels
+    dx, dy = px[ii] - px[jj], py[ii] - py[jj]
+    m = np.sqrt((dx * dx + dy * dy).astype(np.float64)).astype(np.intp) + 2
+    seg_start = np.cumsum(m) - m
+    pair = np.repeat(np.arange(len(m)), m)
+    t = (np.arange(pair.size) - seg_start[pair]).astype(np.float64)
+    lx = t * (dx / (m - 1))[pair] + px[jj][pair]
+    ly = t * (dy / (m - 1))[pair] + py[jj][pair]
+    last = seg_start + m - 1
+    lx[last], ly[last] = px[ii], py[ii]
+    samples = dt[ly.round().astype(np.intp) + first_row[body[jj]][pair], lx.round().astype(np.intp)]
+    valley = np.minimum.reduceat(samples, seg_start)  # lowest point of every segment
+    joined = valley >= valley_ratio * np.minimum(pv[jj], pv[ii])  # no waist between j and i
+    joined_to: dict[int, set[int]] = {}
+    for j, i in zip(jj[joined].tolist(), ii[joined].tolist(), strict=True):
+        joined_to.setdefault(j, set()).add(i)
+    for lo, hi in itertools.pairwise(bounds.tolist()):
+        kept: list[int] = []
+        for j in range(lo, hi):
+            if not joined_to.get(j, set()).intersection(kept):
+                kept.append(j)
+        counts[body[lo]] = max(MIN_MERGED_COUNT, len(kept))
+    return counts
