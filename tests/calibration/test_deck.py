@@ -183,3 +183,13 @@ def test_a_folder_camera_gives_its_next_frame_at_each_position(tmp_path) -> None
     assert [int(capture()[0, 0]) for _ in range(2)] == [40, 80]
     with pytest.raises(CalibrationError, match="no more images"):
         capture()
+
+
+def test_board_points_as_a_list_and_no_pixels_at_all() -> None:
+    assert board_to_deck([[1.0, 2.0]], (10.0, 20.0, -3.0)).tolist() == [[11.0, 18.0, -3.0]]
+    cal = DeckCalibration.from_dict(
+        {"camera_matrix": K.tolist(), "dist_coeffs": D.tolist(), "rvec": MODEL.rvec.tolist(),
+         "tvec": MODEL.tvec.tolist(), "surface_z_mm": -30.0, "residual_mm": 0.0,
+         "n_points": 6, "image_size": list(SIZE)}
+    )  # fmt: skip
+    assert cal.to_deck(np.zeros((0, 2))).shape == (0, 2)
