@@ -257,7 +257,9 @@ class MarkerTracker:
         Parameters
         ----------
         image : ndarray
-            The frame, grey (H, W) or colour (H, W, 3, BGR), ``uint8`` (or float 0-255).
+            The frame, grey (H, W) or colour (H, W, 3, BGR), as
+            :func:`~labauto.vision.markers.detect_markers` takes it (``uint8``, or float on a
+            0-1 or 0-255 scale).
         """
         started = time.perf_counter()
         grey = grey_image(image) if self.search.candidates else np.asarray(image)
