@@ -86,3 +86,11 @@ def test_views_that_share_a_name_are_reported_each_on_its_own() -> None:
     assert [v.used for v in result.views] == [True] * 4 + [False]
     assert result.views[4].reason == "only 3 board points (needs 8)"
     assert result.views[4].rms_px is None
+
+
+def test_names_that_do_not_match_the_images_are_refused_in_one_line() -> None:
+    from labauto.vision.boards import coded_board
+
+    image = np.full((64, 64), 200, np.uint8)
+    with pytest.raises(CalibrationError, match=r"^1 names for 2 images$"):
+        labauto.calibrate_camera(coded_board(2, 2, 20.0), [image, image], names=["a"])
