@@ -42,6 +42,8 @@ def board_views(
 
     if not images:
         raise CalibrationError("no images given")
+    if names is not None and len(names) != len(images):
+        raise CalibrationError(f"{len(names)} names for {len(images)} images")
     labels = (
         list(names)
         if names is not None

@@ -107,11 +107,12 @@ def _frame_source(config: Config, robot) -> Callable[[], np.ndarray]:
 
     plugins = load_plugins(config.plugins.enabled, config.plugins.disabled)
     camera = plugins.registry.driver("camera", config.camera.driver)(config.camera)
+    frames = iter(camera)  # one pass: each capture is the next frame, not the first again
 
     def capture() -> np.ndarray:
-        for _name, image in camera:
+        for _name, image in frames:
             return image
-        raise CalibrationError(f"camera {config.camera.driver!r} gave no image")
+        raise CalibrationError(f"camera {config.camera.driver!r} gave no more images")
 
     return capture
 

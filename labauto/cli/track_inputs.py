@@ -8,7 +8,7 @@ Rigid set (``--board FILE.yaml``), any of:
 * a mapping ``{3: [x, y, z], 4: [x, y, z], ...}`` (also under ``markers:``).
 
 Camera (``--calibration FILE``): ``camera_matrix`` (3x3) and ``dist_coeffs`` from an OpenCV
-FileStorage file (YAML or XML, as ``labauto calibrate camera`` exports it; also
+FileStorage file (YAML, XML or JSON, as ``labauto calibrate camera --out`` writes it; also
 ``distortion_coefficients``, OpenCV's sample name) or from the JSON of
 ``labauto calibrate camera --json``. For two-camera triangulation (``--stereo``) each file also
 gives the camera's pose in the common world frame: ``rvec`` (Rodrigues) and ``tvec`` (mm),
@@ -121,7 +121,9 @@ def _read_fields(path: Path, names: tuple[str, ...]) -> dict[str, Any]:
             raise InputError(f"{path}: cannot read the calibration JSON ({exc})") from None
         if not isinstance(data, dict):
             raise InputError(f"{path}: expected a JSON object")
-        return {name: data.get(name) for name in names}
+        if not _opencv_json(data):
+            return {name: data.get(name) for name in names}
+        # else the JSON flavour of FileStorage (``calibrate ... --out FILE.json``): read below
     try:
         storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     except cv2.error:
@@ -133,3 +135,8 @@ def _read_fields(path: Path, names: tuple[str, ...]) -> dict[str, Any]:
         return out
     finally:
         storage.release()
+
+
+def _opencv_json(data: dict[str, Any]) -> bool:
+    """True for JSON written by ``cv2.FileStorage`` (its matrices are ``opencv-matrix`` objects)."""
+    return any(isinstance(v, dict) and v.get("type_id") == "opencv-matrix" for v in data.values())

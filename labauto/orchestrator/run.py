@@ -372,6 +372,7 @@ class ColonyPickingRun:
             )
             id_of = {c.colony_index: c.id for c in self.store.colonies(self.run_id, stored.id)}
         else:
+            _check_image_size(plate_name, image, calibration)
             id_of = self._store_plate(position, plate_name, image, result, calibration)
         self._write_outputs(plate_name, image, result, id_of)
         on_this_plate = set(id_of.values())
@@ -600,6 +601,19 @@ class ColonyPickingRun:
         }
         picked = {local for local, stored in id_of.items() if stored in touched}
         write_plate_outputs(self.output_dir, plate_name, image, result, picked)
+
+
+def _check_image_size(plate_name: str, image: np.ndarray, calibration: Any) -> None:
+    """Refuse a plate image whose size is not the one a camera-model calibration is for (its
+    pixels would map to the wrong deck positions); a homography has no image size."""
+    size = getattr(calibration, "image_size", None)
+    height, width = image.shape[:2]
+    if size is not None and (width, height) != tuple(size):
+        raise RunError(
+            f"{plate_name}: {width}x{height} pixels, but the stored deck calibration is for "
+            f"{size[0]}x{size[1]} images; calibrate the deck with this camera mode "
+            "(labauto calibrate deck) or set calibration.use_stored: false"
+        )
 
 
 def _summary(info: dict[str, Any]) -> str:

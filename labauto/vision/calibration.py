@@ -170,49 +170,49 @@ def calibrate_camera(
     CalibrationFailed
         Too few usable views (the message names how many and why the others are not).
     """
-    reasons: dict[str, str | None] = {}
-    usable: list[ViewPoints] = []
-    for v in views:
+    # views are told apart by their place in ``views``: two may share a name
+    reasons: dict[int, str] = {}
+    usable: list[int] = []
+    for i, v in enumerate(views):
         if v.reason is not None:
-            reasons[v.name] = v.reason
+            reasons[i] = v.reason
         elif len(v.image_points) < min_points:
-            reasons[v.name] = f"only {len(v.image_points)} board points (needs {min_points})"
+            reasons[i] = f"only {len(v.image_points)} board points (needs {min_points})"
         else:
-            usable.append(v)
+            usable.append(i)
     _need(usable, views, reasons, min_views)
     while True:
-        rms, k, d, rvecs, tvecs, errors = _fit(usable, image_size, flags)
+        rms, k, d, rvecs, tvecs, errors = _fit([views[i] for i in usable], image_size, flags)
         limit = max(max_view_rms_px, 3.0 * float(np.median(errors)))
         worst = int(np.argmax(errors))
         if errors[worst] <= limit or len(usable) <= min_views:
             break
-        reasons[usable[worst].name] = (
+        reasons[usable[worst]] = (
             f"reprojection RMS {errors[worst]:.3f} px, over {limit:.3f} px (an outlier)"
         )
         usable.pop(worst)
     if circle_radius_mm is not None:
-        measured = [v.image_points for v in usable]
+        fitted = [views[i] for i in usable]
+        measured = [v.image_points for v in fitted]
         for _ in range(3):
-            usable = [
+            fitted = [
                 ViewPoints(
                     v.name, m - _bias_in_image(v, circle_radius_mm, k, d, r, t), v.object_points
                 )
-                for v, m, r, t in zip(usable, measured, rvecs, tvecs, strict=True)
+                for v, m, r, t in zip(fitted, measured, rvecs, tvecs, strict=True)
             ]
-            rms, k, d, rvecs, tvecs, errors = _fit(usable, image_size, flags)
-    error_of = {v.name: e for v, e in zip(usable, errors, strict=True)}
-    results = []
-    for v in views:
-        used = v.name in error_of
-        results.append(
-            ViewResult(
-                v.name,
-                len(v.image_points),
-                error_of.get(v.name),
-                used,
-                None if used else reasons.get(v.name),
-            )
+            rms, k, d, rvecs, tvecs, errors = _fit(fitted, image_size, flags)
+    error_of = dict(zip(usable, errors, strict=True))
+    results = [
+        ViewResult(
+            v.name,
+            len(v.image_points),
+            error_of.get(i),
+            i in error_of,
+            None if i in error_of else reasons.get(i),
         )
+        for i, v in enumerate(views)
+    ]
     return CameraCalibration(
         rms, k, d.ravel(), (int(image_size[0]), int(image_size[1])), results, rvecs, tvecs
     )
@@ -239,11 +239,13 @@ def _bias_in_image(
     return moved - proj.reshape(-1, 2)
 
 
-def _need(usable: list, views: Sequence[ViewPoints], reasons: dict, min_views: int) -> None:
+def _need(
+    usable: list[int], views: Sequence[ViewPoints], reasons: dict[int, str], min_views: int
+) -> None:
     if len(usable) >= min_views:
         return
-    ok = {id(v) for v in usable}
-    why = Counter(reasons.get(v.name, "unknown") for v in views if id(v) not in ok)
+    ok = set(usable)
+    why = Counter(reasons.get(i, "unknown") for i in range(len(views)) if i not in ok)
     detail = "; ".join(f"{n} x {r}" for r, n in why.most_common(3))
     if not views:
         detail = "no views given"

@@ -39,7 +39,8 @@ def board_to_deck(points: np.ndarray, origin_mm: tuple, angle_deg: float = 0.0) 
     ``origin_mm`` is the deck position ``(X, Y, Z)`` of the board's top-left corner and
     ``angle_deg`` the turn of its x axis from +X toward +Y.
     """
-    pts = np.asarray(points, np.float64).reshape(-1, points.shape[-1])
+    pts = np.asarray(points, np.float64)
+    pts = pts.reshape(-1, pts.shape[-1])
     a = np.deg2rad(angle_deg)
     c, s = np.cos(a), np.sin(a)
     x, y = pts[:, 0], pts[:, 1]
@@ -72,6 +73,8 @@ def undistort_points(
     reprojection matches within 1e-6 px (``cv2.projectPoints`` is exact forward).
     """
     px = np.asarray(pixels, np.float64).reshape(-1, 2)
+    if not len(px):
+        return np.zeros((0, 2))
     k = np.asarray(camera_matrix, np.float64)
     d = np.asarray(dist_coeffs, np.float64).ravel()
     norm = cv2.undistortPoints(px.reshape(-1, 1, 2), k, d).reshape(-1, 2)

@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from labauto.vision.detector import extract_contours
+from labauto.vision.image import as_image
 from labauto.vision.marker_codes import QUIET_RADIUS
 from labauto.vision.markers import Marker, MarkerParams, find_markers
 from labauto.vision.roi_mosaic import build_mosaic, clip_rect, merge_overlapping
@@ -54,14 +55,10 @@ class CentreCandidates:
 
 
 def grey_image(image: np.ndarray) -> np.ndarray:
-    """The uint8 grey image the marker detector works on (BGR converted, floats on 0-255)."""
-    img = np.asarray(image)
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[..., 0]
-    if img.ndim not in (2, 3) or img.size == 0 or (img.ndim == 3 and img.shape[2] != 3):
-        raise ValueError(f"expected an (H, W) or (H, W, 3) image, got shape {img.shape}")
-    if img.dtype != np.uint8:
-        img = np.clip(np.rint(np.nan_to_num(img.astype(np.float64))), 0, 255).astype(np.uint8)
+    """The uint8 grey image the marker detector works on: read by the rules of
+    :func:`labauto.vision.image.as_image`, as :func:`~labauto.vision.markers.detect_markers`
+    reads it (so a float 0-1 or a BGRA frame gives the same markers), BGR converted."""
+    img = as_image(image, min_side=1)
     return cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
 
 

@@ -33,10 +33,11 @@ Window size
     of its own before it is taken (:meth:`~labauto.vision.tracking_search.MarkerSearch.
     in_windows`).
 Full-frame search
-    On the first frame, every ``full_interval`` frames (so markers entering the view are picked
-    up within ``full_interval`` frames: a marker that re-enters is reported in the next
-    full-frame search), and in the same frame whenever a marker seen in the previous frame is
-    not found in its window (it may have moved past its window, e.g. a jerk, or left the view):
+    On the first frame, ``full_interval`` frames after the last full-frame search (so markers
+    entering the view are picked up within ``full_interval`` frames: a marker that re-enters is
+    reported in the next full-frame search), and in the same frame whenever a marker seen in
+    the previous frame is not found in its window (it may have moved past its window, e.g. a
+    jerk, or left the view):
     then the windowed results are discarded and the frame is searched whole (``mode`` is
     ``"full"``). A marker missing from the full-frame search too is *lost*; its track coasts
     for ``coast_frames`` frames (15: searched in a window growing by ``grow_px`` per missed
@@ -68,9 +69,10 @@ Id-swap guard
     next (a marker seen in the previous frame, with one clear candidate that no other marker
     claims); a lost marker is taken up again only by its code. Beyond that, (1) in a window only
     a detection of the window's own id counts, and only inside the window; (2) when one id is
-    found at more than one place, the one nearest the prediction is taken for a track that was
-    seen in the previous frame, and for a new track the id is not reported at all unless the
-    places are within the marker's own radius (the same marker found twice); (3) a detection of
+    found at more than one place, the one nearest the prediction is taken for a track (seen in
+    the previous frame or coasting), and for a new track the id is not reported at all unless
+    the places are within ``extent_factor`` of its radii (at least 1 px) of the first (the
+    same marker found twice); (3) a detection of
     a tracked id (seen in the previous frame) further than ``gate_factor`` window half-sizes
     from its prediction and inside another marker's window is taken for that marker's code
     misread, not for a jump, and rejected (far from every other marker it is taken for a jump);
@@ -257,7 +259,9 @@ class MarkerTracker:
         Parameters
         ----------
         image : ndarray
-            The frame, grey (H, W) or colour (H, W, 3, BGR), ``uint8`` (or float 0-255).
+            The frame, grey (H, W) or colour (H, W, 3, BGR), as
+            :func:`~labauto.vision.markers.detect_markers` takes it (``uint8``, or float on a
+            0-1 or 0-255 scale).
         """
         started = time.perf_counter()
         grey = grey_image(image) if self.search.candidates else np.asarray(image)

@@ -68,3 +68,29 @@ def test_too_few_views_say_how_many_were_usable_and_why(coded_views) -> None:
         labauto.calibrate_camera(coded_views.board, [coded_views.images[0], blank, blank])
     message = str(err.value)
     assert "1 of 3" in message and "2 x no board found" in message and "\n" not in message
+
+
+def test_views_that_share_a_name_are_reported_each_on_its_own() -> None:
+    """The same file given twice, or names=["a", "a"]: a view set aside was reported used
+    (with the RMS of the other) because the results were keyed by name."""
+    import cv2
+
+    grid = np.array([(x, y, 0.0) for y in range(0, 50, 10) for x in range(0, 70, 10)], float)
+    views = []
+    for k, (rx, ry) in enumerate([(0.3, 0.0), (0.0, 0.3), (-0.3, 0.1), (0.2, -0.3)]):
+        pose = np.array([rx, ry, 0.0]), np.array([-30.0, -20.0, 150.0 + 10 * k])
+        pixels, _ = cv2.projectPoints(grid, *pose, CAMERA, None)
+        views.append(ViewPoints("same.png", pixels.reshape(-1, 2), grid))
+    views.append(ViewPoints("same.png", views[0].image_points[:3], grid[:3]))
+    result = calibrate_views(views, SIZE)
+    assert [v.used for v in result.views] == [True] * 4 + [False]
+    assert result.views[4].reason == "only 3 board points (needs 8)"
+    assert result.views[4].rms_px is None
+
+
+def test_names_that_do_not_match_the_images_are_refused_in_one_line() -> None:
+    from labauto.vision.boards import coded_board
+
+    image = np.full((64, 64), 200, np.uint8)
+    with pytest.raises(CalibrationError, match=r"^1 names for 2 images$"):
+        labauto.calibrate_camera(coded_board(2, 2, 20.0), [image, image], names=["a"])

@@ -168,3 +168,28 @@ def test_board_source_through_the_config(tmp_path) -> None:
     assert cal.residual_mm < 0.01
     pixels, deck = _surface_truth()
     assert np.abs(cal.to_deck(pixels) - deck).max() < 0.02
+
+
+def test_a_folder_camera_gives_its_next_frame_at_each_position(tmp_path) -> None:
+    from labauto.calibration.deck import _frame_source
+    from labauto.imageio import write_image
+
+    frames = tmp_path / "frames"
+    for k in range(2):
+        write_image(frames / f"f{k}.png", np.full((8, 8), 40 * (k + 1), np.uint8))
+    doc = {"camera": {"driver": "folder", "path": str(frames)}, "robot": {"simulate": False}}
+    config = parse_config(yaml.safe_load(yaml.safe_dump(doc)), "<test>")
+    capture = _frame_source(config, None)
+    assert [int(capture()[0, 0]) for _ in range(2)] == [40, 80]
+    with pytest.raises(CalibrationError, match="no more images"):
+        capture()
+
+
+def test_board_points_as_a_list_and_no_pixels_at_all() -> None:
+    assert board_to_deck([[1.0, 2.0]], (10.0, 20.0, -3.0)).tolist() == [[11.0, 18.0, -3.0]]
+    cal = DeckCalibration.from_dict(
+        {"camera_matrix": K.tolist(), "dist_coeffs": D.tolist(), "rvec": MODEL.rvec.tolist(),
+         "tvec": MODEL.tvec.tolist(), "surface_z_mm": -30.0, "residual_mm": 0.0,
+         "n_points": 6, "image_size": list(SIZE)}
+    )  # fmt: skip
+    assert cal.to_deck(np.zeros((0, 2))).shape == (0, 2)

@@ -138,3 +138,21 @@ def test_with_a_stored_deck_calibration_the_camera_model_sees_the_head_without_p
     (miss,) = store.events(outcome.run_id, "head.miss")
     assert miss.data["error_mm"] == pytest.approx(1.0, abs=0.05)
     assert outcome.state == "failed" and "HeadMiss" in outcome.error
+
+
+def test_a_stored_deck_calibration_for_another_image_size_is_refused_before_any_pick(
+    make_config,
+):
+    from labauto.vision.deck import DeckCalibration
+
+    config = make_config(picking={"max_picks": 2})
+    k = np.array([[700.0, 0.0, 320.0], [0.0, 700.0, 256.0], [0.0, 0.0, 1.0]])
+    other = DeckCalibration(k, np.zeros(5), np.array([np.pi, 0.0, 0.0]),
+                            np.array([-84.0, 71.0, 140.0]), config.robot.pick_z_mm, 0.0, 0.0,
+                            12, (640, 512))  # fmt: skip
+    store = Store.open(config.database.url)
+    store.save_calibration("deck", "deck", other.to_dict(), 0.0)
+    with open_run(config, store) as session:
+        outcome = session.execute()
+    assert outcome.state == "failed" and "is for 640x512 images" in outcome.error
+    assert not store.picks_for_run(outcome.run_id)

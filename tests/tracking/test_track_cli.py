@@ -215,3 +215,22 @@ def test_two_cameras_give_triangulated_3d_positions(tmp_path, hard_spec, capsys)
         "--calibration2", cal_right,
     )  # fmt: skip
     assert code == 1 and "needs the camera's pose: rvec and tvec" in err
+
+
+@pytest.mark.parametrize("suffix", [".json", ".yaml", ".xml"])
+def test_a_calibration_written_by_calibrate_out_is_read_back(tmp_path, suffix):
+    """``calibrate camera --out FILE.json`` writes FileStorage's JSON (opencv-matrix objects,
+    ``distortion_coefficients``): --calibration read it as our --json and refused it."""
+    from labauto.calibration.files import write_opencv_yaml
+    from labauto.cli.track_inputs import read_camera, read_camera_view
+
+    k = [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]]
+    doc = {"camera_matrix": k, "dist_coeffs": [0.1, 0.0, 0.0, 0.0, 0.0], "image_size": [640, 480],
+           "rvec": [0.1, 0.2, 0.3], "tvec": [1.0, 2.0, 3.0]}  # fmt: skip
+    path = write_opencv_yaml(tmp_path / f"cal{suffix}", doc)
+    matrix, dist = read_camera(path)
+    assert matrix.tolist() == k and dist.tolist() == doc["dist_coeffs"]
+    assert read_camera_view(path).tvec.tolist() == doc["tvec"]
+    plain = tmp_path / "ours.json"  # the JSON of calibrate camera --json still reads as it is
+    plain.write_text(json.dumps(doc))
+    assert read_camera(plain)[0].tolist() == k

@@ -161,3 +161,17 @@ def test_the_tracker_is_labauto_public_api():
     import labauto
 
     assert labauto.MarkerTracker is MarkerTracker and "MarkerTracker" in labauto.__all__
+
+
+def test_the_tracker_reads_frames_as_detect_markers_does():
+    """A float 0-1 or a BGRA frame: the same markers as the uint8 grey frame (it found none
+    in the float frame and refused the BGRA one)."""
+    from labauto.synthetic.marker_scenes import marker_scene
+
+    image, _ = marker_scene(np.random.default_rng(3), 640, 512, n_markers=6, n_rectangles=2,
+                            n_artefacts=2, max_tilt_deg=20.0)  # fmt: skip
+    expected = MarkerTracker().update(image).centers()
+    assert len(expected) == 6
+    bgra = np.dstack([image] * 3 + [np.full_like(image, 255)])
+    for frame in (image / 255.0, bgra):
+        assert MarkerTracker().update(frame).centers().keys() == expected.keys()
