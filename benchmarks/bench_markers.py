@@ -125,7 +125,8 @@ def speed(repeats: int, n_scenes: int) -> dict:
 
 
 def stage_times(image: np.ndarray) -> list[float]:
-    """ms of: contours, DES prefilter + first fits, code read, circles + bias correction."""
+    """ms of: contours, DES prefilter + algebraic fits, code read, circles re-measured + bias
+    correction, the rest (geometric fits where the re-measure gave none, the results)."""
     from labauto.vision import markers as mk
     from labauto.vision.detector import extract_contours
 
@@ -133,18 +134,17 @@ def stage_times(image: np.ndarray) -> list[float]:
     t = [time.perf_counter()]
     contours = extract_contours(image, params.detector_params())
     t.append(time.perf_counter())
-    _angles, fits, keep = mk._candidates(image, contours, params)
+    _centroids, _index, rows = mk._candidates(image, contours, params)
     t.append(time.perf_counter())
-    pixels = image.astype(np.float32)
-    ellipses = [fits[k] for k in keep]
-    ids, _score, _bit0, bits, start = mk._read_codes(pixels, ellipses, params)
+    ids, score, _bit0, bits, start = mk._read_codes(image, rows, params)
+    picked = [j for _, j in mk._best_reads(ids, score)]
     t.append(time.perf_counter())
-    good = [j for j in range(len(ellipses)) if ids[j] >= 0]
-    circles = mk.refine_circles(pixels, [ellipses[j] for j in good], [bits[j] for j in good],
-                                [float(start[j]) for j in good], params.min_contrast)  # fmt: skip
-    mk.marker_centers(circles)
+    mk.refine_circles(image.astype(np.float32), rows[picked], bits[picked], start[picked],
+                      params.min_contrast)  # fmt: skip
     t.append(time.perf_counter())
-    return [(b - a) * 1e3 for a, b in itertools.pairwise(t)]
+    stages = [(b - a) * 1e3 for a, b in itertools.pairwise(t)]
+    whole = mk.find_markers(image, params).timing_ms
+    return [*stages, whole - sum(stages)]
 
 
 def _row(name: str, acc: dict) -> str:
@@ -185,8 +185,8 @@ def main() -> None:
         print(f"| {name} | {np.median(t):.1f} | {np.percentile(t, 90):.1f} | {n} of 40 |")
     image = marker_scene(np.random.default_rng(2000))[0]
     stages = np.median([stage_times(image) for _ in range(args.repeats * 2)], axis=0)
-    names = ("contours (gradient, Canny, linking, sub-pixel)", "DES prefilter + first fits",
-             "code read", "circles re-measured + bias correction")  # fmt: skip
+    names = ("contours (gradient, Canny, linking, sub-pixel)", "DES prefilter + algebraic fits",
+             "code read", "circles re-measured + bias correction", "the rest")  # fmt: skip
     print()
     print("Stages of detect_markers, median ms: " + "; ".join(
         f"{n} {v:.1f}" for n, v in zip(names, stages, strict=True)))  # fmt: skip

@@ -30,11 +30,12 @@ for more, so once a marker is read its three circles are measured again, along r
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import cv2
 import numpy as np
 
 from labauto.vision.concentric import projected_centers
-from labauto.vision.ellipse import Ellipse
 from labauto.vision.ellipse_fit import fit_ellipses_geometric_batch
 from labauto.vision.marker_codes import N_BITS, RING_INNER, RING_OUTER
 
@@ -53,18 +54,15 @@ MIN_POINTS = 12
 MAX_RMS = 0.3
 
 
-def affine_frames(ellipses: list[Ellipse]) -> tuple[np.ndarray, np.ndarray]:
-    """Centres (K, 2) and affine maps (K, 2, 2) taking the unit circle onto each ellipse."""
-    return _row_frames(_rows(ellipses))
+def affine_frames(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (K, 2) and affine maps (K, 2, 2) taking the unit circle onto each ellipse.
 
-
-def _rows(ellipses: list[Ellipse]) -> np.ndarray:
-    """(K, 5) rows ``(cx, cy, a, b, angle_deg)``."""
-    return np.array([(*e.center, *e.axes, e.angle) for e in ellipses], np.float64).reshape(-1, 5)
-
-
-def _row_frames(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Centres and unit-circle maps of ellipse rows ``(cx, cy, a, b, angle_deg)``."""
+    Parameters
+    ----------
+    rows : np.ndarray
+        (K, 5) ellipse rows ``(cx, cy, a, b, angle_deg)``.
+    """
+    rows = np.asarray(rows, np.float64).reshape(-1, 5)
     theta = np.deg2rad(rows[:, 4])
     c, s = np.cos(theta), np.sin(theta)
     maps = np.empty((len(rows), 2, 2))
@@ -73,56 +71,50 @@ def _row_frames(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return rows[:, :2].copy(), maps
 
 
-def _rays(bits: np.ndarray, bit0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _rays(bits: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Owner (marker index), angle and circle (0 centre, 1 inner, 2 outer) of every ray.
 
     Rays come grouped by marker, then by circle: ``CENTRE_RAYS`` on the centre circle, then
     ``SECTOR_RAYS`` per ink sector on the inner edge and the same on the outer edge.
     """
     k = len(bits)
-    centre = np.broadcast_to(2.0 * np.pi * (np.arange(CENTRE_RAYS) + 0.5) / CENTRE_RAYS,
-                             (k, CENTRE_RAYS))  # fmt: skip
+    centre = 2.0 * np.pi * (np.arange(CENTRE_RAYS) + 0.5) / CENTRE_RAYS
     frac = 0.25 + 0.5 * (np.arange(SECTOR_RAYS) + 0.5) / SECTOR_RAYS
-    sector = bit0[:, None, None] + 2.0 * np.pi * (np.arange(N_BITS)[None, :, None] + frac) / N_BITS
-    ink = np.repeat(np.asarray(bits, bool), SECTOR_RAYS, axis=1)  # (k, N_BITS * SECTOR_RAYS)
-    sector = sector.reshape(k, -1)
-    # per marker: centre rays, its ink rays (inner edge), the same again (outer edge)
-    n_ink = ink.sum(axis=1)
-    counts = CENTRE_RAYS + 2 * n_ink
-    owner = np.repeat(np.arange(k), counts)
-    which = np.concatenate(
-        [np.repeat([0, 1, 2], [CENTRE_RAYS, n, n]) for n in n_ink.tolist()]
-    ) if k else np.empty(0, np.int64)  # fmt: skip
+    sector = (np.arange(N_BITS)[:, None] + frac).ravel() * (2.0 * np.pi / N_BITS)
+    n = len(sector)
+    # one row per marker: all centre rays, every sector ray twice; the ink ones are used
     angles = np.concatenate(
-        [np.concatenate((centre[m], sector[m][ink[m]], sector[m][ink[m]])) for m in range(k)]
-    ) if k else np.empty(0)  # fmt: skip
-    return owner, angles, which
-
-
-Circles = tuple[Ellipse | None, Ellipse | None, Ellipse | None]
+        (np.broadcast_to(centre, (k, CENTRE_RAYS)), np.tile(start[:, None] + sector, 2)), axis=1
+    )
+    ink = np.repeat(np.asarray(bits, bool).reshape(k, N_BITS), SECTOR_RAYS, axis=1)
+    used = np.concatenate((np.ones((k, CENTRE_RAYS), bool), ink, ink), axis=1)
+    which = np.repeat(np.array([0, 1, 2]), [CENTRE_RAYS, n, n])
+    owner = np.broadcast_to(np.arange(k)[:, None], used.shape)
+    return owner[used], angles[used], np.broadcast_to(which, used.shape)[used]
 
 
 def refine_circles(
     grey: np.ndarray,
-    ellipses: list[Ellipse],
-    bits: list[np.ndarray],
-    bit0: list[float],
+    frames: np.ndarray,
+    bits: np.ndarray,
+    start: np.ndarray,
     min_contrast: float,
     max_passes: int = 6,
     tol_px: float = 0.01,
-) -> list[Circles]:
+) -> tuple[np.ndarray, np.ndarray]:
     """Fits of the centre circle and the code ring's inner and outer edges of every marker.
 
     Parameters
     ----------
     grey : np.ndarray
         HxW float32 image.
-    ellipses : list of Ellipse
-        First fit of each marker's centre circle.
-    bits : list of np.ndarray
-        Each marker's code as read (``N_BITS`` values 0/1, read bit 0 first).
-    bit0 : list of float
-        Direction (rad, rectified frame) where read bit 0 starts.
+    frames : np.ndarray
+        (K, 5) ellipse rows ``(cx, cy, a, b, angle_deg)``: each marker's centre circle as
+        first found, whose rectified frame the code was read in.
+    bits : np.ndarray
+        (K, N_BITS) each marker's code as read (0/1, read bit 0 first).
+    start : np.ndarray
+        (K,) direction (rad, rectified frame) where read bit 0 starts.
     min_contrast : float
         Least ink-paper difference of the markers (grey levels).
     max_passes, tol_px : int, float
@@ -130,48 +122,48 @@ def refine_circles(
         every window is centred on its edge (its truncation cancels) and, under strong
         perspective, the ring's rays follow the ring's own ellipse rather than the scaled centre
         circle. A marker is measured again until its edges lay within ``CENTRED_PX`` of the
-        windows' centres or its centre (:func:`marker_centers`) moves less than ``tol_px``
-        (two passes for most markers, up to five or six for one seen with strong
-        perspective), at most ``max_passes`` times.
+        windows' centres or its centre moves less than ``tol_px`` (two passes for most
+        markers, up to five or six for one seen with strong perspective), at most
+        ``max_passes`` times.
 
     Returns
     -------
-    list of (centre, inner, outer)
-        The three fits per marker, None where too few rays were usable or the fit is poor.
+    circles : np.ndarray
+        (K, 3, 5) rows of the centre circle's, the inner and the outer edge's fits; NaN where
+        too few rays were usable or the fit is poor.
+    centres : np.ndarray
+        (K, 2) projected centres (:func:`centres_of`), NaN where there is none.
     """
-    if not ellipses:
-        return []
-    k = len(ellipses)
-    first = _rows(ellipses)
+    first = np.asarray(frames, np.float64).reshape(-1, 5)
+    k = len(first)
     guess = np.repeat(first[:, None, :], 3, axis=1)  # (K, 3 circles, 5): the scaled centre circle
     for w, f in ((1, RING_INNER), (2, RING_OUTER)):
         guess[:, w, 2:4] *= f
-    owner, theta, which = _rays(np.asarray(bits), np.asarray(bit0, np.float64))
-    _, centre_maps = _row_frames(first)
-    unit = np.column_stack((np.cos(theta), np.sin(theta)))
-    # every ray keeps its image direction (from the first fit's frame, where the sectors were
-    # read) through all passes; only its start (the circle's centre) and its expected crossing
+    owner, theta, which = _rays(np.asarray(bits), np.asarray(start, np.float64))
+    _, centre_maps = affine_frames(first)
+    # every ray keeps its image direction (from the first frame, where the sectors were read)
+    # through all passes; only its start (the circle's centre) and its expected crossing
     # follow the fits. (A frame's rotation is arbitrary for a near-circle: re-deriving the
     # directions from each new fit could turn the ring's rays onto the sector ends.)
-    direction = np.einsum("kij,kj->ki", centre_maps[owner], unit)
-    reach = np.hypot(direction[:, 0], direction[:, 1])
-    # the window stays clear of the neighbouring circle (one centre radius away)
-    half = np.minimum(WINDOW_PX, 0.45 * reach)
-    key = owner * 3 + which
-    result = np.full((k, 3, 5), np.nan)  # NaN rows: no fit
+    m = centre_maps[owner]
+    cos, sin = np.cos(theta), np.sin(theta)
+    rays = _Rays(
+        key=owner * 3 + which,
+        dx=m[:, 0, 0] * cos + m[:, 0, 1] * sin,
+        dy=m[:, 1, 0] * cos + m[:, 1, 1] * sin,
+    )
+    circles = np.full((k, 3, 5), np.nan)  # NaN rows: no fit
+    centres = np.full((k, 2), np.nan)
     active = np.ones(k, bool)
-    for _ in range(max_passes):
-        centres, maps = _row_frames(guess.reshape(-1, 5))
-        live = active[owner]
-        edge, usable, offset = _measure(
-            grey, centres[key[live]], maps[key[live]], direction[live], half[live], min_contrast
-        )
-        fits = _fit_sets(guess, edge, key[live], usable)
+    for _ in range(max_passes if k else 0):
+        live = rays if active.all() else rays.of(active[owner])
+        edge, usable, offset = _measure(grey, guess.reshape(-1, 5), live, min_contrast)
+        fits = _fit_sets(guess, edge, live.key, usable)
         todo = np.flatnonzero(active)
-        now, before = _centres(fits[todo]), _centres(result[todo])
-        moved = np.hypot(*(now - before).T)
-        centred = _windows_centred(offset, usable, key[live], k)[todo]
-        result[todo] = fits[todo]
+        now = centres_of(fits[todo])
+        moved = np.hypot(*(now - centres[todo]).T)
+        centred = _windows_centred(offset, usable, live.key, k)[todo]
+        circles[todo], centres[todo] = fits[todo], now
         got = np.isfinite(fits[:, :, 0]) & active[:, None]
         guess[got] = fits[got]
         # done when the windows sat on their edges (another pass would measure the same) or the
@@ -179,77 +171,86 @@ def refine_circles(
         active[todo] = np.isfinite(now).all(axis=1) & ~centred & ~(moved <= tol_px)
         if not active.any():
             break
-    return [
-        tuple(
-            None if not np.isfinite(r[0]) else Ellipse((r[0], r[1]), (r[2], r[3]), r[4])
-            for r in circles.tolist()
-        )
-        for circles in result
-    ]  # type: ignore[misc]
+    return circles, centres
 
 
-def _centres(rows: np.ndarray) -> np.ndarray:
-    """(K, 2) projected centres of (K, 3, 5) circle rows (see :func:`marker_centers`)."""
-    ring = np.where(np.isfinite(rows[:, 2, :1]), rows[:, 2], rows[:, 1])
-    out = np.full((len(rows), 2), np.nan)
-    have = np.isfinite(rows[:, 0, 0]) & np.isfinite(ring[:, 0])
+@dataclass(frozen=True)
+class _Rays:
+    """Rays ``centre + s * (dx, dy)`` of circles ``key`` (``marker * 3 + circle``), with what
+    every pass needs of them: the half window (px; it stays clear of the neighbouring circle,
+    one centre radius away), the length in px of a unit of ``s``, and the window's step
+    vector per half window."""
+
+    key: np.ndarray
+    dx: np.ndarray
+    dy: np.ndarray
+    half: np.ndarray = field(init=False)
+    px_per_unit: np.ndarray = field(init=False)
+    reach_x: np.ndarray = field(init=False)
+    reach_y: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        px_per_unit = np.hypot(self.dx, self.dy)
+        half = np.minimum(WINDOW_PX, 0.45 * px_per_unit)
+        reach = half / px_per_unit  # units of s per half window
+        object.__setattr__(self, "half", half)
+        object.__setattr__(self, "px_per_unit", px_per_unit)
+        object.__setattr__(self, "reach_x", (self.dx * reach).astype(np.float32)[:, None])
+        object.__setattr__(self, "reach_y", (self.dy * reach).astype(np.float32)[:, None])
+
+    def of(self, mask: np.ndarray) -> _Rays:
+        """The rays where ``mask``."""
+        return _Rays(self.key[mask], self.dx[mask], self.dy[mask])
+
+
+def centres_of(circles: np.ndarray) -> np.ndarray:
+    """(K, 2) projected centres of (K, 3, 5) circle rows, NaN where there is none: the centre
+    circle with the outer ring edge (radius ratio 3, the best-conditioned pair), or with the
+    inner edge when the outer one failed (:func:`labauto.vision.concentric.projected_centers`).
+    """
+    ring = np.where(np.isfinite(circles[:, 2, :1]), circles[:, 2], circles[:, 1])
+    out = np.full((len(circles), 2), np.nan)
+    have = np.isfinite(circles[:, 0, 0]) & np.isfinite(ring[:, 0])
     if have.any():
-        out[have] = projected_centers(rows[have, 0], ring[have])
+        out[have] = projected_centers(circles[have, 0], ring[have])
     return out
 
 
-def marker_centers(circles: list[Circles]) -> np.ndarray:
-    """(K, 2) projected centres from the fits (NaN where there is none): the centre circle
-    with the outer ring edge (radius ratio 3, the best-conditioned pair), or with the inner
-    edge when the outer one failed."""
-    rows = np.full((len(circles), 3, 5), np.nan)
-    for k, fits in enumerate(circles):
-        for w, e in enumerate(fits):
-            if e is not None:
-                rows[k, w] = (*e.center, *e.axes, e.angle)
-    return _centres(rows)
-
-
 def _measure(
-    grey: np.ndarray,
-    centres: np.ndarray,
-    maps: np.ndarray,
-    direction: np.ndarray,
-    half: np.ndarray,
-    min_contrast: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Edge point along every ray ``centre + s * direction`` near the ellipse ``(centre, map)``,
-    whether it is usable, and its offset (px) from the window's centre."""
+    grey: np.ndarray, circles: np.ndarray, rays: _Rays, min_contrast: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Edge point along every ray near its circle's ellipse (``circles[rays.key]``, rows
+    ``(cx, cy, a, b, angle_deg)``), whether it is usable, and its offset (px) from the
+    window's centre."""
     n_samples = round(2 * WINDOW_PX / STEP_PX)
     grid = ((np.arange(n_samples) + 0.5) / n_samples * 2.0 - 1.0).astype(np.float32)
-    # expected crossing: |map^-1 (s0 direction)| = 1
-    det = maps[:, 0, 0] * maps[:, 1, 1] - maps[:, 0, 1] * maps[:, 1, 0]
-    local = (
-        np.column_stack(
-            (
-                maps[:, 1, 1] * direction[:, 0] - maps[:, 0, 1] * direction[:, 1],
-                maps[:, 0, 0] * direction[:, 1] - maps[:, 1, 0] * direction[:, 0],
-            )
-        )
-        / det[:, None]
-    )  # map^-1 direction (2x2 inverse written out)
-    s0 = 1.0 / np.hypot(local[:, 0], local[:, 1])
-    px_per_unit = np.hypot(direction[:, 0], direction[:, 1])
-    along = (half / px_per_unit).astype(np.float32)[:, None] * grid[None, :] + s0.astype(
-        np.float32
-    )[:, None]
-    mx = centres[:, :1].astype(np.float32) + direction[:, :1].astype(np.float32) * along
-    my = centres[:, 1:].astype(np.float32) + direction[:, 1:].astype(np.float32) * along
-    prof = cv2.remap(grey, mx, my, cv2.INTER_LINEAR, cv2.BORDER_REPLICATE)
-    start, end = prof[:, :3].mean(axis=1), prof[:, -3:].mean(axis=1)
-    step = (end - start).astype(np.float64)
+    # expected crossing s0: the ray's direction in the ellipse's unit-circle frame has length
+    # 1 / s0 (the inverse of the frame's map, rotation then axes, written out per circle)
+    theta = np.deg2rad(circles[:, 4])
+    c, s = np.cos(theta), np.sin(theta)
+    inverse = np.column_stack((c / circles[:, 2], s / circles[:, 2], c / circles[:, 3],
+                               s / circles[:, 3], circles[:, 0], circles[:, 1]))  # fmt: skip
+    ca, sa, cb, sb, cx, cy = inverse[rays.key].T
+    dx, dy = rays.dx, rays.dy
+    s0 = 1.0 / np.hypot(ca * dx + sa * dy, cb * dy - sb * dx)
+    # sample i of a ray is at centre + s0 (dx, dy) + grid_i * reach (dx, dy)
+    mx = rays.reach_x * grid
+    mx += (cx + dx * s0).astype(np.float32)[:, None]
+    my = rays.reach_y * grid
+    my += (cy + dy * s0).astype(np.float32)[:, None]
+    prof = cv2.remap(grey, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    # (OpenCV's row reductions: several times faster than numpy's on these short rows)
+    total = cv2.reduce(prof, 1, cv2.REDUCE_SUM, dtype=cv2.CV_64F)[:, 0]
+    start = cv2.reduce(prof[:, :3], 1, cv2.REDUCE_AVG, dtype=cv2.CV_64F)[:, 0]
+    end = cv2.reduce(prof[:, -3:], 1, cv2.REDUCE_AVG, dtype=cv2.CV_64F)[:, 0]
+    step = end - start
     usable = np.abs(step) >= MIN_STEP_SHARE * min_contrast
     # sum of (1 - n_i) = n_samples - (sum(prof) - n * start) / step
-    total = prof.sum(axis=1, dtype=np.float64)
     ones = n_samples - (total - n_samples * start) / np.where(usable, step, 1.0)
-    edge_px = -half + ones * (2.0 * half / n_samples)
-    usable &= np.abs(edge_px) < half
-    edge = centres + (s0 + edge_px / px_per_unit)[:, None] * direction
+    edge_px = rays.half * (ones * (2.0 / n_samples) - 1.0)
+    usable &= np.abs(edge_px) < rays.half
+    along = s0 + edge_px / rays.px_per_unit
+    edge = np.column_stack((cx + along * dx, cy + along * dy))
     return edge, usable, edge_px
 
 
@@ -271,12 +272,12 @@ def _fit_sets(
     """(K, 3, 5) geometric fits of each circle's edge points (NaN: too few points or poor fit),
     seeded by ``guess``; ``key`` is ``marker * 3 + circle`` of every ray (grouped by key)."""
     out = np.full(guess.shape, np.nan)
-    k = key[usable]
-    counts = np.bincount(k, minlength=guess.shape[0] * 3)
-    keys = np.flatnonzero(counts >= MIN_POINTS)
+    counts = np.bincount(key[usable], minlength=guess.shape[0] * 3)
+    enough = counts >= MIN_POINTS
+    keys = np.flatnonzero(enough)
     if keys.size == 0:
         return out
-    points = edge[usable][np.isin(k, keys)]
+    points = edge[usable & enough[key]]
     offsets = np.concatenate(([0], np.cumsum(counts[keys]))).astype(np.int64)
     flat = guess.reshape(-1, 5)
     fits = fit_ellipses_geometric_batch(points, offsets, flat[keys], max_iter=20, tol=1e-8)

@@ -56,12 +56,12 @@ import numpy as np
 from labauto.vision.contours import Contours
 from labauto.vision.detector import DetectorParams, extract_contours, validate_params
 from labauto.vision.ellipse import Ellipse
-from labauto.vision.ellipse_fit import fit_selected_ellipses
+from labauto.vision.ellipse_fit import fit_ellipses_algebraic_batch, fit_selected_ellipses
 from labauto.vision.image import as_image
 from labauto.vision.marker_codes import N_BITS, RING_OUTER, decode_words
 from labauto.vision.marker_codes import warm as warm_codes
-from labauto.vision.marker_edges import affine_frames, marker_centers, refine_circles
-from labauto.vision.shape_angle import ShapeAngles, shape_angles
+from labauto.vision.marker_edges import affine_frames, refine_circles
+from labauto.vision.shape_angle import shape_angles
 
 #: Samples per sector along the ring, and the ring radii sampled (centre radii).
 SAMPLES_PER_BIT = 8
@@ -265,104 +265,136 @@ def _circle(radii: tuple[float, ...], n: int) -> np.ndarray:
     return np.concatenate([np.column_stack((r * np.cos(t), r * np.sin(t))) for r in radii])
 
 
+def _phase_windows() -> np.ndarray:
+    """(S, N_BITS, S - 2) ring sample indices: for phase p, sector k's samples
+    ``k*S + p + 1 .. k*S + p + S - 2`` (the sector without one sample at each end)."""
+    s = SAMPLES_PER_BIT
+    idx = np.arange(s)[:, None, None] + s * np.arange(N_BITS)[None, :, None] + np.arange(1, s - 1)
+    return idx % (N_BITS * s)
+
+
 def _read_codes(
-    grey: np.ndarray, ellipses: list[Ellipse], params: MarkerParams
+    grey: np.ndarray, rows: np.ndarray, params: MarkerParams
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Ids (-1: no code), scores, code bit-0 directions (rad), bits as read and where read bit 0
-    starts (rad), all in the rectified frames of the ellipses."""
-    k = len(ellipses)
-    centres, maps = affine_frames(ellipses)
+    starts (rad), all in the rectified frames of the ellipse rows ``(cx, cy, a, b, angle)``."""
+    k = len(rows)
+    centres, maps = affine_frames(rows)
     n_ring = N_BITS * SAMPLES_PER_BIT
     # the levels first: only a candidate with marker contrast has its ring sampled
     ink = np.median(_sample(grey, centres, maps, _circle(INK_RADII, 8)), axis=1)
     paper = np.median(_sample(grey, centres, maps, _circle(PAPER_RADII, 24)), axis=1)
     contrast = paper - ink
     lit = np.flatnonzero(np.abs(contrast) >= params.min_contrast)
+    ids = np.full(k, -1)
+    score = np.zeros(k)
+    bit0 = np.zeros(k)
+    bits = np.zeros((k, N_BITS), bool)
+    start = np.zeros(k)
+    if lit.size == 0:
+        return ids, score, bit0, bits, start
     ring = _sample(grey, centres[lit], maps[lit], _circle(READ_RADII, n_ring))
     ring = ring.reshape(len(lit), len(READ_RADII), n_ring).mean(axis=1)
-    level = np.full((k, n_ring), 0.5)  # candidates without contrast read as undecided
-    level[lit] = (ring - ink[lit, None]) / contrast[lit, None]  # 0 ink .. 1 paper
-    # per phase p: sector k covers samples k*S + p .. k*S + p + S - 1; drop one at each end
+    level = (ring - ink[lit, None]) / contrast[lit, None]  # 0 ink .. 1 paper
+    # every phase p at once: (lit, phase, sector) means; the phase with the most decisive
+    # weakest bit wins (the first such phase on a tie)
+    means = level[:, _phase_windows()].mean(axis=3)
+    margins = np.min(np.abs(means - 0.5), axis=2) * 2.0
+    phase = np.argmax(margins, axis=1)
+    margin = margins[np.arange(len(lit)), phase]
+    read = means[np.arange(len(lit)), phase] < 0.5
+    words = (read.astype(np.int64) << np.arange(N_BITS)).sum(axis=1)
+    found, turns = decode_words(words)
+    ok = margin >= params.min_margin
     s = SAMPLES_PER_BIT
-    best_margin = np.full(k, -np.inf)
-    best_bits = np.zeros((k, N_BITS), bool)
-    best_phase = np.zeros(k, np.int64)
-    for p in range(s):
-        rolled = np.roll(level, -p, axis=1).reshape(k, N_BITS, s)[:, :, 1:-1]
-        means = rolled.mean(axis=2)
-        margin = np.min(np.abs(means - 0.5), axis=1) * 2.0
-        better = margin > best_margin
-        best_margin = np.where(better, margin, best_margin)
-        best_bits[better] = means[better] < 0.5
-        best_phase[better] = p
-    words = (best_bits.astype(np.int64) << np.arange(N_BITS)).sum(axis=1)
-    ids, turns = decode_words(words)
-    ok = (np.abs(contrast) >= params.min_contrast) & (best_margin >= params.min_margin)
-    ids = np.where(ok, ids, -1)
-    score = best_margin * np.minimum(np.abs(contrast) * 2.0 / 255.0, 1.0)
+    ids[lit] = np.where(ok, found, -1)
+    score[lit] = margin * np.minimum(np.abs(contrast[lit]) * 2.0 / 255.0, 1.0)
     # read bit i starts at angle (i*S + p) * 2 pi / n_ring; the code's bit 0 is read bit -turns
-    bit0 = ((-turns) % N_BITS * s + best_phase) * 2.0 * np.pi / n_ring
-    start = best_phase * 2.0 * np.pi / n_ring  # where read bit 0 starts
-    return ids, score, bit0, best_bits, start
+    bit0[lit] = ((-turns) % N_BITS * s + phase) * 2.0 * np.pi / n_ring
+    bits[lit] = read
+    start[lit] = phase * 2.0 * np.pi / n_ring  # where read bit 0 starts
+    return ids, score, bit0, bits, start
+
+
+def _plausible(rows: np.ndarray, shape: tuple[int, ...], params: MarkerParams) -> np.ndarray:
+    """(K,) bool: ellipse rows ``(cx, cy, a, b, angle)`` of a centre circle's size (and not
+    flatter than 1:4) whose code ring lies inside the image (False for NaN rows)."""
+    cx, cy, a, b = rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
+    h, w = shape[:2]
+    reach = RING_OUTER * a + 1
+    return (
+        (a >= params.min_radius_px)
+        & (a <= params.max_radius_px)
+        & (b >= 0.25 * a)
+        & (cx - reach >= 0)
+        & (cy - reach >= 0)
+        & (cx + reach <= w - 1)
+        & (cy + reach <= h - 1)
+    )
 
 
 def _candidates(
     grey: np.ndarray, contours: Contours, params: MarkerParams
-) -> tuple[ShapeAngles, list[Ellipse | None], list[int]]:
-    """Shape angles of all contours, the first fits of the DES of a plausible size, and the
-    indices of the fits whose code ring lies inside the image."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """DES centroids of all contours, and the indices and algebraic ellipse rows of the DES of
+    a plausible size whose code ring lies inside the image."""
     angles = shape_angles(contours.points, contours.gradients, contours.offsets, contours.closed)
     des = angles.is_des(params.des_threshold_deg)
     # cheap size test before fitting: the DES's extent from its area
     radius = np.sqrt(np.maximum(angles.area, 0.0) / np.pi)
     des &= (radius >= params.min_radius_px * 0.5) & (radius <= params.max_radius_px * 1.2)
-    fits = fit_selected_ellipses(contours.points, contours.offsets, des, max_iter=10, tol=1e-7)
-    h, w = grey.shape
-    keep = []
-    for k, e in enumerate(fits):
-        if e is None:
-            continue
-        a, b = e.axes
-        if not params.min_radius_px <= a <= params.max_radius_px or b < 0.25 * a:
-            continue
-        reach = RING_OUTER * a + 1
-        cx, cy = e.center
-        if cx - reach < 0 or cy - reach < 0 or cx + reach > w - 1 or cy + reach > h - 1:
-            continue  # the code ring leaves the image
-        keep.append(k)
-    return angles, fits, keep
+    index = np.flatnonzero(des)
+    # the algebraic fit of every contour (cheaper than gathering the DES), good to a small
+    # fraction of a sector for the code read; the geometric fit waits for the markers
+    rows = fit_ellipses_algebraic_batch(contours.points, contours.offsets)[index]
+    keep = _plausible(rows, grey.shape, params)
+    return np.asarray(angles.centroid), index[keep], rows[keep]
 
 
-def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list[Marker]:
-    angles, fits, keep = _candidates(grey, contours, params)
-    if not keep:
-        return []
-    ellipses = [fits[k] for k in keep]
-    pixels = grey.astype(np.float32)  # sampled at sub-pixel positions from here on
-    ids, score, bit0, bits, start = _read_codes(pixels, ellipses, params)
+def _best_reads(ids: np.ndarray, score: np.ndarray) -> list[tuple[int, int]]:
+    """``(id, candidate)`` of the best read of every id found, by id."""
     best: dict[int, int] = {}
     for j, marker_id in enumerate(ids.tolist()):
         if marker_id >= 0 and (marker_id not in best or score[j] > score[best[marker_id]]):
             best[marker_id] = j
-    chosen = sorted(best.items())
-    picked = [j for _, j in chosen]
-    circles = (
-        refine_circles(
-            pixels,
-            [ellipses[j] for j in picked],
-            [bits[j] for j in picked],
-            [float(start[j]) for j in picked],
-            params.min_contrast,
+    return sorted(best.items())
+
+
+def _ellipse(row: np.ndarray) -> Ellipse:
+    cx, cy, a, b, angle = row.tolist()
+    return Ellipse((cx, cy), (a, b), angle)
+
+
+def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list[Marker]:
+    centroids, index, rows = _candidates(grey, contours, params)
+    if not len(index):
+        return []
+    ids, score, bit0, bits, start = _read_codes(grey, rows, params)
+    chosen = _best_reads(ids, score)
+    if not chosen:
+        return []
+    picked = np.array([j for _, j in chosen], np.int64)
+    k = len(picked)
+    circles, centres = np.full((k, 3, 5), np.nan), np.full((k, 2), np.nan)
+    if params.correct_bias:
+        pixels = grey.astype(np.float32)  # sampled at sub-pixel positions from here on
+        circles, centres = refine_circles(
+            pixels, rows[picked], bits[picked], start[picked], params.min_contrast
         )
-        if params.correct_bias
-        else [(None, None, None)] * len(picked)
-    )
+    # the geometric fit of the centre circle's contour where the re-measure gave none
+    need = ~np.isfinite(circles[:, 0, 0])
+    mask = np.zeros(len(contours), bool)
+    mask[index[picked[need]]] = True
+    first = fit_selected_ellipses(contours.points, contours.offsets, mask, max_iter=10, tol=1e-7)
     out = []
-    centres = marker_centers(circles)
-    for (marker_id, j), (centre_fit, inner, outer), xy in zip(
-        chosen, circles, centres, strict=True
-    ):
-        e = centre_fit if centre_fit is not None else ellipses[j]
+    for (marker_id, j), fits, xy in zip(chosen, circles, centres, strict=True):
+        if np.isfinite(fits[0, 0]):
+            e = _ellipse(fits[0])
+        else:
+            e = first[index[j]]
+            if e is None or not _plausible(np.array([[*e.center, *e.axes, e.angle]]),
+                                           grey.shape, params)[0]:  # fmt: skip
+                continue
         centre = (float(xy[0]), float(xy[1])) if np.isfinite(xy).all() else None
         if (
             centre is not None
@@ -370,8 +402,8 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
             > MAX_BIAS_SHARE * e.axes[1] + MAX_BIAS_PX
         ):
             centre = None  # a bias that large is a failed ring fit, not perspective
-        ring = tuple(r for r in (inner, outer) if r is not None)
-        cx, cy = angles.centroid[keep[j]]
+        ring = tuple(_ellipse(r) for r in fits[1:] if np.isfinite(r[0]))
+        cx, cy = centroids[index[j]]
         out.append(
             Marker(
                 id=marker_id,
