@@ -155,23 +155,41 @@ def refine_circles(
     circles = np.full((k, 3, 5), np.nan)  # NaN rows: no fit
     centres = np.full((k, 2), np.nan)
     active = np.ones(k, bool)
+    tried_inner = np.zeros(k, bool)
     for _ in range(max_passes if k else 0):
-        live = rays if active.all() else rays.of(active[owner])
+        measure = _circles_to_measure(active, circles)
+        tried_inner |= measure[:, 1]
+        live = rays.of(measure.ravel()[rays.key])
         edge, usable, offset = _measure(grey, guess.reshape(-1, 5), live, min_contrast)
         fits = _fit_sets(guess, edge, live.key, usable)
         todo = np.flatnonzero(active)
-        now = centres_of(fits[todo])
+        circles[measure] = fits[measure]
+        now = centres_of(circles[todo])
         moved = np.hypot(*(now - centres[todo]).T)
-        centred = _windows_centred(offset, usable, live.key, k)[todo]
-        circles[todo], centres[todo] = fits[todo], now
-        got = np.isfinite(fits[:, :, 0]) & active[:, None]
+        centred = _windows_centred(offset, usable, live.key, measure)[todo]
+        centres[todo] = now
+        got = np.isfinite(fits[:, :, 0]) & measure
         guess[got] = fits[got]
         # done when the windows sat on their edges (another pass would measure the same) or the
-        # centre stopped moving; no centre yet (NaN): nothing more to gain
-        active[todo] = np.isfinite(now).all(axis=1) & ~centred & ~(moved <= tol_px)
+        # centre stopped moving; no centre (NaN): nothing more to gain, unless the inner edge
+        # is still to stand in for a failed outer one
+        retry = ~np.isfinite(circles[todo, 2, 0]) & ~tried_inner[todo]
+        going = np.isfinite(now).all(axis=1) & ~centred & ~(moved <= tol_px)
+        active[todo] = going | retry
         if not active.any():
             break
     return circles, centres
+
+
+def _circles_to_measure(active: np.ndarray, circles: np.ndarray) -> np.ndarray:
+    """(K, 3) bool: the circles of each marker to measure in the next pass: the centre circle
+    and the code ring's outer edge of every active marker, and the ring's inner edge where the
+    outer one has no fit (the centre comes from the centre circle and the outer edge, the
+    best-conditioned pair; the inner edge only stands in for a failed outer one)."""
+    measure = np.zeros(circles.shape[:2], bool)
+    measure[:, 0] = measure[:, 2] = active
+    measure[:, 1] = active & ~np.isfinite(circles[:, 2, 0])
+    return measure
 
 
 @dataclass(frozen=True)
@@ -255,15 +273,15 @@ def _measure(
 
 
 def _windows_centred(
-    offset: np.ndarray, usable: np.ndarray, key: np.ndarray, n_markers: int
+    offset: np.ndarray, usable: np.ndarray, key: np.ndarray, measured: np.ndarray
 ) -> np.ndarray:
-    """(K,) bool: every circle of the marker had its edges within ``CENTRED_PX`` (mean
-    distance) of the windows' centres."""
+    """(K,) bool: every circle of the marker measured (``measured``, (K, 3)) had its edges
+    within ``CENTRED_PX`` (mean distance) of the windows' centres."""
     k = key[usable]
-    count = np.bincount(k, minlength=3 * n_markers)
-    total = np.bincount(k, np.abs(offset[usable]), minlength=3 * n_markers)
-    mean = np.where(count > 0, total / np.maximum(count, 1), np.inf)
-    return (mean.reshape(n_markers, 3) <= CENTRED_PX).all(axis=1)
+    count = np.bincount(k, minlength=measured.size)
+    total = np.bincount(k, np.abs(offset[usable]), minlength=measured.size)
+    mean = np.where(count > 0, total / np.maximum(count, 1), np.inf).reshape(measured.shape)
+    return ((mean <= CENTRED_PX) | ~measured).all(axis=1)
 
 
 def _fit_sets(
