@@ -42,7 +42,8 @@ from labauto.vision.marker_codes import N_BITS, RING_INNER, RING_OUTER
 #: Rays on the centre circle; rays per ink sector (over its middle half) on each ring edge.
 CENTRE_RAYS = 64
 SECTOR_RAYS = 6
-#: Half window (px) and sample step (px) along a ray.
+#: Half window (px) along a ray, in the first pass and after; sample step (px).
+FIRST_WINDOW_PX = 5.0
 WINDOW_PX = 3.0
 STEP_PX = 0.25
 #: A ray is used when the ends of its profile differ by at least this share of the contrast.
@@ -151,15 +152,20 @@ def refine_circles(
         key=owner * 3 + which,
         dx=m[:, 0, 0] * cos + m[:, 0, 1] * sin,
         dy=m[:, 1, 0] * cos + m[:, 1, 1] * sin,
+        window=WINDOW_PX,
     )
     circles = np.full((k, 3, 5), np.nan)  # NaN rows: no fit
     centres = np.full((k, 2), np.nan)
     active = np.ones(k, bool)
     tried_inner = np.zeros(k, bool)
-    for _ in range(max_passes if k else 0):
+    for n_pass in range(max_passes if k else 0):
         measure = _circles_to_measure(active, circles)
         tried_inner |= measure[:, 1]
-        live = rays.of(measure.ravel()[rays.key])
+        use = measure.ravel()[rays.key]
+        if n_pass == 0:  # a wide look from the first guesses, on every other ray
+            live = rays.of(use & (np.arange(len(use)) % 2 == 0), FIRST_WINDOW_PX)
+        else:
+            live = rays.of(use, WINDOW_PX if n_pass == 1 else FIRST_WINDOW_PX)
         edge, usable, offset = _measure(grey, guess.reshape(-1, 5), live, min_contrast)
         fits = _fit_sets(guess, edge, live.key, usable)
         todo = np.flatnonzero(active)
@@ -195,13 +201,14 @@ def _circles_to_measure(active: np.ndarray, circles: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class _Rays:
     """Rays ``centre + s * (dx, dy)`` of circles ``key`` (``marker * 3 + circle``), with what
-    every pass needs of them: the half window (px; it stays clear of the neighbouring circle,
-    one centre radius away), the length in px of a unit of ``s``, and the window's step
-    vector per half window."""
+    a pass needs of them: the half window (``window`` px, less where the neighbouring circle,
+    one centre radius away, is closer), the length in px of a unit of ``s``, and the window's
+    half length as a vector."""
 
     key: np.ndarray
     dx: np.ndarray
     dy: np.ndarray
+    window: float
     half: np.ndarray = field(init=False)
     px_per_unit: np.ndarray = field(init=False)
     reach_x: np.ndarray = field(init=False)
@@ -209,16 +216,16 @@ class _Rays:
 
     def __post_init__(self) -> None:
         px_per_unit = np.hypot(self.dx, self.dy)
-        half = np.minimum(WINDOW_PX, 0.45 * px_per_unit)
+        half = np.minimum(self.window, 0.45 * px_per_unit)
         reach = half / px_per_unit  # units of s per half window
         object.__setattr__(self, "half", half)
         object.__setattr__(self, "px_per_unit", px_per_unit)
         object.__setattr__(self, "reach_x", (self.dx * reach).astype(np.float32)[:, None])
         object.__setattr__(self, "reach_y", (self.dy * reach).astype(np.float32)[:, None])
 
-    def of(self, mask: np.ndarray) -> _Rays:
-        """The rays where ``mask``."""
-        return _Rays(self.key[mask], self.dx[mask], self.dy[mask])
+    def of(self, mask: np.ndarray, window: float) -> _Rays:
+        """The rays where ``mask``, with windows of ``window`` px."""
+        return _Rays(self.key[mask], self.dx[mask], self.dy[mask], window)
 
 
 def centres_of(circles: np.ndarray) -> np.ndarray:
@@ -240,7 +247,7 @@ def _measure(
     """Edge point along every ray near its circle's ellipse (``circles[rays.key]``, rows
     ``(cx, cy, a, b, angle_deg)``), whether it is usable, and its offset (px) from the
     window's centre."""
-    n_samples = round(2 * WINDOW_PX / STEP_PX)
+    n_samples = round(2 * rays.window / STEP_PX)
     grid = ((np.arange(n_samples) + 0.5) / n_samples * 2.0 - 1.0).astype(np.float32)
     # expected crossing s0: the ray's direction in the ellipse's unit-circle frame has length
     # 1 / s0 (the inverse of the frame's map, rotation then axes, written out per circle)
