@@ -42,8 +42,9 @@ from labauto.vision.marker_codes import N_BITS, RING_INNER, RING_OUTER
 #: Rays on the centre circle; rays per ink sector (over its middle half) on each ring edge.
 CENTRE_RAYS = 64
 SECTOR_RAYS = 6
-#: Half window (px) along a ray, in the first pass and after; sample step (px).
-FIRST_WINDOW_PX = 5.0
+#: Half window (px) and sample step (px) along a ray, in the first pass (a wide, coarse look
+#: on every other ray: only the next pass's windows depend on it) and after.
+FIRST_WINDOW_PX, FIRST_STEP_PX = 5.0, 0.5
 WINDOW_PX = 3.0
 STEP_PX = 0.25
 #: A ray is used when the ends of its profile differ by at least this share of the contrast.
@@ -153,6 +154,7 @@ def refine_circles(
         dx=m[:, 0, 0] * cos + m[:, 0, 1] * sin,
         dy=m[:, 1, 0] * cos + m[:, 1, 1] * sin,
         window=WINDOW_PX,
+        step=STEP_PX,
     )
     circles = np.full((k, 3, 5), np.nan)  # NaN rows: no fit
     centres = np.full((k, 2), np.nan)
@@ -163,9 +165,9 @@ def refine_circles(
         tried_inner |= measure[:, 1]
         use = measure.ravel()[rays.key]
         if n_pass == 0:  # a wide look from the first guesses, on every other ray
-            live = rays.of(use & (np.arange(len(use)) % 2 == 0), FIRST_WINDOW_PX)
+            live = rays.of(use & (np.arange(len(use)) % 2 == 0), FIRST_WINDOW_PX, FIRST_STEP_PX)
         else:
-            live = rays.of(use, WINDOW_PX if n_pass == 1 else FIRST_WINDOW_PX)
+            live = rays.of(use, WINDOW_PX if n_pass == 1 else FIRST_WINDOW_PX, STEP_PX)
         edge, usable, offset = _measure(grey, guess.reshape(-1, 5), live, min_contrast)
         fits = _fit_sets(guess, edge, live.key, usable)
         todo = np.flatnonzero(active)
@@ -209,6 +211,7 @@ class _Rays:
     dx: np.ndarray
     dy: np.ndarray
     window: float
+    step: float
     half: np.ndarray = field(init=False)
     px_per_unit: np.ndarray = field(init=False)
     reach_x: np.ndarray = field(init=False)
@@ -223,9 +226,9 @@ class _Rays:
         object.__setattr__(self, "reach_x", (self.dx * reach).astype(np.float32)[:, None])
         object.__setattr__(self, "reach_y", (self.dy * reach).astype(np.float32)[:, None])
 
-    def of(self, mask: np.ndarray, window: float) -> _Rays:
-        """The rays where ``mask``, with windows of ``window`` px."""
-        return _Rays(self.key[mask], self.dx[mask], self.dy[mask], window)
+    def of(self, mask: np.ndarray, window: float, step: float) -> _Rays:
+        """The rays where ``mask``, with windows of ``window`` px sampled every ``step`` px."""
+        return _Rays(self.key[mask], self.dx[mask], self.dy[mask], window, step)
 
 
 def centres_of(circles: np.ndarray) -> np.ndarray:
@@ -247,7 +250,7 @@ def _measure(
     """Edge point along every ray near its circle's ellipse (``circles[rays.key]``, rows
     ``(cx, cy, a, b, angle_deg)``), whether it is usable, and its offset (px) from the
     window's centre."""
-    n_samples = round(2 * rays.window / STEP_PX)
+    n_samples = round(2 * rays.window / rays.step)
     grid = ((np.arange(n_samples) + 0.5) / n_samples * 2.0 - 1.0).astype(np.float32)
     # expected crossing s0: the ray's direction in the ellipse's unit-circle frame has length
     # 1 / s0 (the inverse of the frame's map, rotation then axes, written out per circle)

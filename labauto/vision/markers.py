@@ -265,12 +265,19 @@ def _circle(radii: tuple[float, ...], n: int) -> np.ndarray:
     return np.concatenate([np.column_stack((r * np.cos(t), r * np.sin(t))) for r in radii])
 
 
-def _phase_windows() -> np.ndarray:
-    """(S, N_BITS, S - 2) ring sample indices: for phase p, sector k's samples
-    ``k*S + p + 1 .. k*S + p + S - 2`` (the sector without one sample at each end)."""
+def _sector_means(level: np.ndarray) -> np.ndarray:
+    """(K, S, N_BITS) mean level of every sector for every phase p of S: sector k of phase p
+    is ring samples ``k*S + p + 1 .. k*S + p + S - 2`` (the sector without one sample at each
+    end), cyclically."""
     s = SAMPLES_PER_BIT
-    idx = np.arange(s)[:, None, None] + s * np.arange(N_BITS)[None, :, None] + np.arange(1, s - 1)
-    return idx % (N_BITS * s)
+    k, n = level.shape
+    width = s - 2
+    # moving sums over ``width`` samples starting at each sample (cyclic), by cumulative sums
+    cum = np.zeros((k, n + width))
+    np.cumsum(np.concatenate((level, level[:, :width - 1]), axis=1), axis=1, out=cum[:, 1:])
+    sums = cum[:, width:] - cum[:, :n]  # sums[:, j] = level[:, j .. j + width - 1]
+    # the window of phase p, sector k starts at k*S + p + 1
+    return np.roll(sums, -1, axis=1).reshape(k, N_BITS, s).transpose(0, 2, 1) / width
 
 
 def _read_codes(
@@ -298,7 +305,7 @@ def _read_codes(
     level = (ring - ink[lit, None]) / contrast[lit, None]  # 0 ink .. 1 paper
     # every phase p at once: (lit, phase, sector) means; the phase with the most decisive
     # weakest bit wins (the first such phase on a tie)
-    means = level[:, _phase_windows()].mean(axis=3)
+    means = _sector_means(level)
     margins = np.min(np.abs(means - 0.5), axis=2) * 2.0
     phase = np.argmax(margins, axis=1)
     margin = margins[np.arange(len(lit)), phase]
