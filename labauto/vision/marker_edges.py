@@ -149,13 +149,9 @@ def refine_circles(
     # directions from each new fit could turn the ring's rays onto the sector ends.)
     m = centre_maps[owner]
     cos, sin = np.cos(theta), np.sin(theta)
-    rays = _Rays(
-        key=owner * 3 + which,
-        dx=m[:, 0, 0] * cos + m[:, 0, 1] * sin,
-        dy=m[:, 1, 0] * cos + m[:, 1, 1] * sin,
-        window=WINDOW_PX,
-        step=STEP_PX,
-    )
+    dx = m[:, 0, 0] * cos + m[:, 0, 1] * sin
+    dy = m[:, 1, 0] * cos + m[:, 1, 1] * sin
+    rays = _Rays(owner * 3 + which, dx, dy, np.hypot(dx, dy))
     circles = np.full((k, 3, 5), np.nan)  # NaN rows: no fit
     centres = np.full((k, 2), np.nan)
     active = np.ones(k, bool)
@@ -202,33 +198,33 @@ def _circles_to_measure(active: np.ndarray, circles: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _Rays:
-    """Rays ``centre + s * (dx, dy)`` of circles ``key`` (``marker * 3 + circle``), with what
-    a pass needs of them: the half window (``window`` px, less where the neighbouring circle,
-    one centre radius away, is closer), the length in px of a unit of ``s``, and the window's
-    half length as a vector."""
+    """Rays ``centre + s * (dx, dy)`` of circles ``key`` (``marker * 3 + circle``), and what a
+    pass needs of them: the length in px of a unit of ``s``, the window (``window`` px each
+    side, less where the neighbouring circle, one centre radius away, is closer: ``half``)
+    sampled every ``step`` px, and the half window as a vector (float32 columns)."""
 
     key: np.ndarray
     dx: np.ndarray
     dy: np.ndarray
-    window: float
-    step: float
+    px_per_unit: np.ndarray
+    window: float = WINDOW_PX
+    step: float = STEP_PX
     half: np.ndarray = field(init=False)
-    px_per_unit: np.ndarray = field(init=False)
     reach_x: np.ndarray = field(init=False)
     reach_y: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        px_per_unit = np.hypot(self.dx, self.dy)
-        half = np.minimum(self.window, 0.45 * px_per_unit)
-        reach = half / px_per_unit  # units of s per half window
+        half = np.minimum(self.window, 0.45 * self.px_per_unit)
+        reach = half / self.px_per_unit  # units of s per half window
         object.__setattr__(self, "half", half)
-        object.__setattr__(self, "px_per_unit", px_per_unit)
         object.__setattr__(self, "reach_x", (self.dx * reach).astype(np.float32)[:, None])
         object.__setattr__(self, "reach_y", (self.dy * reach).astype(np.float32)[:, None])
 
     def of(self, mask: np.ndarray, window: float, step: float) -> _Rays:
         """The rays where ``mask``, with windows of ``window`` px sampled every ``step`` px."""
-        return _Rays(self.key[mask], self.dx[mask], self.dy[mask], window, step)
+        return _Rays(
+            self.key[mask], self.dx[mask], self.dy[mask], self.px_per_unit[mask], window, step
+        )
 
 
 def centres_of(circles: np.ndarray) -> np.ndarray:
@@ -309,9 +305,8 @@ def _fit_sets(
     offsets = np.concatenate(([0], np.cumsum(counts[keys]))).astype(np.int64)
     flat = guess.reshape(-1, 5)
     fits = fit_ellipses_geometric_batch(points, offsets, flat[keys], max_iter=20, tol=1e-8)
-    flat_out = out.reshape(-1, 5)
-    for j, fit in zip(keys.tolist(), fits, strict=True):
-        if fit is not None and fit.rms <= MAX_RMS:
-            e = fit.ellipse
-            flat_out[j] = (*e.center, *e.axes, e.angle)
+    good = [j for j, f in enumerate(fits) if f is not None and f.rms <= MAX_RMS]
+    if good:
+        es = [fits[j].ellipse for j in good]
+        out.reshape(-1, 5)[keys[good]] = [(*e.center, *e.axes, e.angle) for e in es]
     return out
