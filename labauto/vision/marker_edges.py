@@ -166,14 +166,16 @@ def refine_circles(
             live = rays.of(use, WINDOW_PX if n_pass == 1 else FIRST_WINDOW_PX, STEP_PX)
         edge, usable, offset = _measure(grey, guess.reshape(-1, 5), live, min_contrast)
         fits = _fit_sets(guess, edge, live.key, usable)
-        todo = np.flatnonzero(active)
         circles[measure] = fits[measure]
+        got = np.isfinite(fits[:, :, 0]) & measure
+        guess[got] = fits[got]
+        if n_pass == 0 and max_passes > 1:
+            continue  # the coarse first look only places the next pass's windows
+        todo = np.flatnonzero(active)
         now = centres_of(circles[todo])
         moved = np.hypot(*(now - centres[todo]).T)
         centred = _windows_centred(offset, usable, live.key, measure)[todo]
         centres[todo] = now
-        got = np.isfinite(fits[:, :, 0]) & measure
-        guess[got] = fits[got]
         # done when the windows sat on their edges (another pass would measure the same) or the
         # centre stopped moving; no centre (NaN): nothing more to gain, unless the inner edge
         # is still to stand in for a failed outer one
