@@ -388,8 +388,9 @@ def _best_reads(ids: np.ndarray, score: np.ndarray) -> list[tuple[int, int]]:
     return sorted(best.items())
 
 
-def _ellipse(row: np.ndarray) -> Ellipse:
-    cx, cy, a, b, angle = row.tolist()
+def _ellipse(row: list[float]) -> Ellipse:
+    """The ellipse of a row ``[cx, cy, a, b, angle_deg]``."""
+    cx, cy, a, b, angle = row
     return Ellipse((cx, cy), (a, b), angle)
 
 
@@ -414,34 +415,39 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
     mask = np.zeros(len(contours), bool)
     mask[index[picked[need]]] = True
     first = fit_selected_ellipses(contours.points, contours.offsets, mask, max_iter=10, tol=1e-7)
-    out = []
-    for (marker_id, j), fits, xy in zip(chosen, circles, centres, strict=True):
-        if np.isfinite(fits[0, 0]):
-            e = _ellipse(fits[0])
-        else:
-            e = first[index[j]]
-            if e is None or not _plausible(np.array([[*e.center, *e.axes, e.angle]]),
-                                           grey.shape, params)[0]:  # fmt: skip
-                continue
-        centre = (float(xy[0]), float(xy[1])) if np.isfinite(xy).all() else None
-        if (
-            centre is not None
-            and np.hypot(centre[0] - e.center[0], centre[1] - e.center[1])
-            > MAX_BIAS_SHARE * e.axes[1] + MAX_BIAS_PX
-        ):
-            centre = None  # a bias that large is a failed ring fit, not perspective
-        ring = tuple(_ellipse(r) for r in fits[1:] if np.isfinite(r[0]))
-        cx, cy = centroids[index[j]]
-        out.append(
-            Marker(
-                id=marker_id,
-                center=centre if centre is not None else e.center,
-                centroid=(float(cx), float(cy)),
-                ellipse=e,
-                score=float(score[j]),
-                rotation_deg=float(np.degrees(bit0[j])),
-                bias_corrected=centre is not None,
-                ring_ellipses=ring if centre is not None else (),
-            )
+    ellipses = circles[:, 0].copy()
+    for j in np.flatnonzero(need).tolist():
+        e = first[index[picked[j]]]
+        if e is not None:
+            ellipses[j] = (*e.center, *e.axes, e.angle)
+    keep = np.flatnonzero(_plausible(ellipses, grey.shape, params))  # none for NaN rows
+    # a bias larger than any perspective makes is a failed ring fit
+    bias = np.hypot(*(centres - ellipses[:, :2]).T)
+    corrected = np.isfinite(bias) & (bias <= MAX_BIAS_SHARE * ellipses[:, 3] + MAX_BIAS_PX)
+    centres = np.where(corrected[:, None], centres, ellipses[:, :2])
+    rings = np.where(corrected[:, None, None], circles[:, 1:], np.nan)  # only those used
+    # plain Python values from here on (numpy scalars are slow one at a time)
+    columns = zip(
+        [chosen[j][0] for j in keep.tolist()],
+        centres[keep].tolist(),
+        centroids[index[picked[keep]]].tolist(),
+        ellipses[keep].tolist(),
+        score[picked[keep]].tolist(),
+        np.degrees(bit0[picked[keep]]).tolist(),
+        corrected[keep].tolist(),
+        rings[keep].tolist(),
+        strict=True,
+    )
+    return [
+        Marker(
+            id=marker_id,
+            center=(x, y),
+            centroid=(cx, cy),
+            ellipse=_ellipse(e),
+            score=read_score,
+            rotation_deg=rotation,
+            bias_corrected=ok,
+            ring_ellipses=tuple(_ellipse(r) for r in ring if r[0] == r[0]),  # NaN: no fit
         )
-    return out
+        for marker_id, (x, y), (cx, cy), e, read_score, rotation, ok, ring in columns
+    ]
