@@ -1,15 +1,17 @@
-"""Sub-pixel edges of a marker's three concentric circles, for its bias-free centre.
+"""Sub-pixel edges of a marker's concentric circles, for its bias-free centre.
 
 Canny's sub-pixel points (a parabola through three gradient magnitudes) are good to a few
 hundredths of a pixel but carry a small periodic bias with the edge's position in the pixel
 grid; on a 10 px circle that moves the fitted centre by up to 0.05 px. The paper's goal ("the
 precision of the calibration strongly depends on the precision of the markers in the image") asks
-for more, so once a marker is read its three circles are measured again, along rays:
+for more, so once a marker is read its centre circle and the outer edge of its code ring (the
+pair the centre comes from) are measured again, along rays:
 
-* rays leave the centre of the first fit in the marker's rectified frame (the affine frame of the
-  centre circle's ellipse): 64 at even angles for the centre circle (radius 1), and 6 across the
-  middle half of every ink sector of the code ring for its inner (2) and outer (3) edges, so the
-  sector ends, whose corners are rounded by blur, are never used;
+* rays leave the centre of the ellipse the code was read in, in its rectified frame: 64 at even
+  angles for the centre circle (radius 1), and 6 across the middle half of every ink sector of
+  the code ring for its outer (3) edge, so the sector ends, whose corners are rounded by blur,
+  are never used; the same sector rays serve the ring's inner (2) edge, which is measured only
+  where the outer one gives no fit and then stands in for it;
 * along each ray the image is sampled (bilinear) every 0.25 px over a window of +-3 px about the
   expected edge (less where the neighbouring edge is closer);
 * the edge is where the profile's area says it is (the moment method): with the profile
@@ -18,14 +20,19 @@ for more, so once a marker is read its three circles are measured again, along r
   straight edge blurred by any symmetric kernel this is exact whichever way the ray crosses it,
   it averages the noise of all samples, and it needs no threshold; on a curved edge blur moves it
   toward the centre of curvature by about ``sigma^2 / (2 R)``, the same all round, which changes
-  the circle's size but not its centre;
+  the circle's size but not its centre. A window off its edge by a good part of its width
+  pulls the estimate toward its own centre (its ends cut the blurred step unevenly);
 * each circle's points get the geometric ellipse fit (:func:`labauto.vision.ellipse_fit.
   fit_ellipses_geometric_batch`, one batch for all markers), and the projected centre comes from
-  the centre circle's and the outer edge's conics (:func:`marker_centers`,
+  the centre circle's and the outer edge's conics (:func:`centres_of`,
   :func:`labauto.vision.concentric.projected_centers`);
-* the rays are laid out again from the new fits (same image directions, windows centred on the
-  new ellipses) until the windows sat on their edges or the centre stops moving: two passes for
-  most markers, up to six under strong perspective (:func:`refine_circles`).
+* passes (:func:`refine_circles`): the first is a wide, coarse look (every other ray, windows of
+  +-5 px sampled every 0.5 px), since the ring's first guess, the centre circle scaled by 3, can
+  be pixels off under perspective; it only places the next windows. The second measures along
+  every ray with +-3 px windows centred on the first pass's fits, which is the last pass for
+  nearly every marker (its windows sat on their edges). A marker whose windows were still off
+  its edges and whose centre still moved is under strong perspective: it gets wide windows again,
+  pass after pass, until they sit on the edges or the centre stops moving (up to six passes).
 """
 
 from __future__ import annotations
@@ -104,7 +111,7 @@ def refine_circles(
     max_passes: int = 6,
     tol_px: float = 0.01,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Fits of the centre circle and the code ring's inner and outer edges of every marker.
+    """Fits of the centre circle and the code ring's edges of every marker, and its centre.
 
     Parameters
     ----------
@@ -123,16 +130,16 @@ def refine_circles(
         Each pass after the first measures along rays laid out from the previous fits, so that
         every window is centred on its edge (its truncation cancels) and, under strong
         perspective, the ring's rays follow the ring's own ellipse rather than the scaled centre
-        circle. A marker is measured again until its edges lay within ``CENTRED_PX`` of the
-        windows' centres or its centre moves less than ``tol_px`` (two passes for most
-        markers, up to five or six for one seen with strong perspective), at most
-        ``max_passes`` times.
+        circle. After the (coarse) first pass a marker is measured again until its edges lay
+        within ``CENTRED_PX`` of the windows' centres or its centre moves less than ``tol_px``
+        (two passes in all for nearly every marker, up to five or six for one seen with strong
+        perspective), at most ``max_passes`` times.
 
     Returns
     -------
     circles : np.ndarray
-        (K, 3, 5) rows of the centre circle's, the inner and the outer edge's fits; NaN where
-        too few rays were usable or the fit is poor.
+        (K, 3, 5) rows of the centre circle's, the ring's inner and its outer edge's fits; NaN
+        where too few rays were usable, the fit is poor or (the inner edge) not measured.
     centres : np.ndarray
         (K, 2) projected centres (:func:`centres_of`), NaN where there is none.
     """

@@ -8,8 +8,12 @@ objects, we first segment obviously elliptical shapes from artifacts using our D
 2. **DES prefilter**: the shape angle D_alpha (eq. 3) with the centroid-inside test
    (:func:`labauto.vision.shape_angle.shape_angles`); only DES go on, so rectangles, lines,
    ring sectors and other artefacts are never fitted.
-3. **Geometric ellipse fit** of every DES of a plausible size (orthogonal distances, Ahn's
-   method, :func:`labauto.vision.ellipse_fit.fit_selected_ellipses`).
+3. **Ellipse fit for the read**: the direct algebraic fit (Halir-Flusser,
+   :func:`labauto.vision.ellipse_fit.fit_ellipses_algebraic_batch`) of every DES of a
+   plausible size whose code ring lies inside the image. On a marker's centre circle it is
+   within 0.03 px of the geometric fit (centre and axes; 0.002 px on average, noisy renders),
+   far less than the read needs (a sector is over 4 px wide on a 10 px marker), at a sixth of
+   the cost; the geometric fit waits for the markers (step 5).
 4. **Code read** in the ellipse's rectified frame: the affine map taking the unit circle onto the
    fitted ellipse takes the marker's plane, to first order, onto the image (up to an unknown
    rotation, which the rotation-invariant code does not care about). The image is sampled
@@ -22,17 +26,19 @@ objects, we first segment obviously elliptical shapes from artifacts using our D
    :mod:`labauto.vision.marker_codes` (even weight, so one wrong bit never gives another id),
    the ink-paper contrast at least ``min_contrast`` and every bit at least ``min_margin`` from
    the threshold (in units of half the contrast): rectangles, plain dots and artefacts get no
-   id.
+   id. The best read of each id is kept.
 5. **Sub-pixel circles and perspective-bias correction**
-   (:mod:`labauto.vision.marker_edges`): the centre circle and the code ring's inner and outer
-   edges are measured again along rays (the moment of each edge profile), each fitted with the
-   geometric ellipse fit, and the image of the common centre of the centre circle and the
-   ring's outer edge (the best-conditioned pair; the inner edge stands in when the outer one
-   failed) is the eigenvector construction of :mod:`labauto.vision.concentric`, exact under
-   any homography. With no usable ring fit, or a correction larger than any perspective makes
-   (``MAX_BIAS_SHARE`` of the semi-minor axis plus ``MAX_BIAS_PX``), the centre is the centre
-   circle's ellipse centre and ``bias_corrected`` is False. ``ellipse`` is the re-measured
-   centre circle.
+   (:mod:`labauto.vision.marker_edges`): the centre circle and the code ring's outer edge are
+   measured again along rays laid out in the read's frame (the moment of each edge profile),
+   each fitted with the geometric ellipse fit (orthogonal distances, Ahn's method), and the
+   image of their common centre (the best-conditioned pair; the ring's inner edge is measured
+   to stand in only where the outer one fails) is the eigenvector construction of
+   :mod:`labauto.vision.concentric`, exact under any homography. With no usable ring fit, or a
+   correction larger than any perspective makes (``MAX_BIAS_SHARE`` of the semi-minor axis
+   plus ``MAX_BIAS_PX``), the centre is the centre circle's ellipse centre and
+   ``bias_corrected`` is False. ``ellipse`` is the re-measured centre circle; where there is
+   none (``correct_bias=False``, or a failed re-measure) it is the geometric fit of the DES
+   contour (:func:`labauto.vision.ellipse_fit.fit_selected_ellipses`).
 
 Markers must be seen from their printed side: a mirrored marker (seen through a transparent
 sheet, or drawn by a map that flips orientation) reads its ring backwards, which is in general
@@ -140,7 +146,8 @@ class Marker:
     bias_corrected : bool
         ``center`` comes from the concentric ring fits.
     ring_ellipses : tuple of Ellipse
-        Fits of the code ring's inner and outer edges that were used (may be empty).
+        Fits of the code ring's edges that were used: the outer one, with the inner one before
+        it where it stood in (empty when not ``bias_corrected``).
     """
 
     id: int
