@@ -27,12 +27,13 @@ pair the centre comes from) are measured again, along rays:
   the centre circle's and the outer edge's conics (:func:`centres_of`,
   :func:`labauto.vision.concentric.projected_centers`);
 * passes (:func:`refine_circles`): the first is a wide, coarse look (every other ray, windows of
-  +-5 px sampled every 0.5 px), since the ring's first guess, the centre circle scaled by 3, can
-  be pixels off under perspective; it only places the next windows. The second measures along
-  every ray with +-3 px windows centred on the first pass's fits, which is the last pass for
-  nearly every marker (its windows sat on their edges). A marker whose windows were still off
-  its edges and whose centre still moved is under strong perspective: it gets wide windows again,
-  pass after pass, until they sit on the edges or the centre stops moving (up to six passes).
+  +-5 px sampled every 0.5 px, direct algebraic fits), since the ring's first guess, the centre
+  circle scaled by 3, can be pixels off under perspective; it only places the next windows. The
+  second measures along every ray with +-3 px windows centred on the first pass's fits, which
+  is the last pass for nearly every marker (its windows sat on their edges). A marker whose
+  windows were still off its edges and whose centre still moved is under strong perspective:
+  it gets wide windows again, pass after pass, until they sit on the edges or the centre stops
+  moving (up to six passes).
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ import cv2
 import numpy as np
 
 from labauto.vision.concentric import projected_centers
-from labauto.vision.ellipse_fit import fit_ellipses_geometric_batch
+from labauto.vision.ellipse_fit import fit_ellipses_algebraic_batch, fit_ellipses_geometric_batch
 from labauto.vision.marker_codes import N_BITS, RING_INNER, RING_OUTER
 
 #: Rays on the centre circle; rays per ink sector (over its middle half) on each ring edge.
@@ -172,7 +173,8 @@ def refine_circles(
         else:
             live = rays.of(use, WINDOW_PX if n_pass == 1 else FIRST_WINDOW_PX, STEP_PX)
         edge, usable, offset = _measure(grey, guess.reshape(-1, 5), live, min_contrast)
-        fits = _fit_sets(guess, edge, live.key, usable)
+        # (the coarse first look needs no more than the direct algebraic fits)
+        fits = _fit_sets(guess, edge, live.key, usable, geometric=n_pass > 0)
         circles[measure] = fits[measure]
         got = np.isfinite(fits[:, :, 0]) & measure
         guess[got] = fits[got]
@@ -300,10 +302,15 @@ def _windows_centred(
 
 
 def _fit_sets(
-    guess: np.ndarray, edge: np.ndarray, key: np.ndarray, usable: np.ndarray
+    guess: np.ndarray,
+    edge: np.ndarray,
+    key: np.ndarray,
+    usable: np.ndarray,
+    geometric: bool = True,
 ) -> np.ndarray:
     """(K, 3, 5) geometric fits of each circle's edge points (NaN: too few points or poor fit),
-    seeded by ``guess``; ``key`` is ``marker * 3 + circle`` of every ray (grouped by key)."""
+    seeded by ``guess``; ``key`` is ``marker * 3 + circle`` of every ray (grouped by key).
+    With ``geometric`` False, the direct algebraic fits (no seeds, no rms test)."""
     out = np.full(guess.shape, np.nan)
     counts = np.bincount(key[usable], minlength=guess.shape[0] * 3)
     enough = counts >= MIN_POINTS
@@ -312,6 +319,9 @@ def _fit_sets(
         return out
     points = edge[usable & enough[key]]
     offsets = np.concatenate(([0], np.cumsum(counts[keys]))).astype(np.int64)
+    if not geometric:
+        out.reshape(-1, 5)[keys] = fit_ellipses_algebraic_batch(points, offsets)
+        return out
     flat = guess.reshape(-1, 5)
     fits = fit_ellipses_geometric_batch(points, offsets, flat[keys], max_iter=20, tol=1e-8)
     good = [j for j, f in enumerate(fits) if f is not None and f.rms <= MAX_RMS]
