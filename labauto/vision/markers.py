@@ -418,15 +418,18 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
             pixels, rows[picked], bits[picked], start[picked], params.min_contrast
         )
     # the geometric fit of the centre circle's contour where the re-measure gave none
-    need = ~np.isfinite(circles[:, 0, 0])
-    mask = np.zeros(len(contours), bool)
-    mask[index[picked[need]]] = True
-    first = fit_selected_ellipses(contours.points, contours.offsets, mask, max_iter=10, tol=1e-7)
     ellipses = circles[:, 0].copy()
-    for j in np.flatnonzero(need).tolist():
-        e = first[index[picked[j]]]
-        if e is not None:
-            ellipses[j] = (*e.center, *e.axes, e.angle)
+    need = np.flatnonzero(~np.isfinite(ellipses[:, 0]))
+    if need.size:
+        mask = np.zeros(len(contours), bool)
+        mask[index[picked[need]]] = True
+        first = fit_selected_ellipses(
+            contours.points, contours.offsets, mask, max_iter=10, tol=1e-7
+        )
+        for j in need.tolist():
+            e = first[index[picked[j]]]
+            if e is not None:
+                ellipses[j] = (*e.center, *e.axes, e.angle)
     keep = np.flatnonzero(_plausible(ellipses, grey.shape, params))  # none for NaN rows
     # a bias larger than any perspective makes is a failed ring fit
     bias = np.hypot(*(centres - ellipses[:, :2]).T)
