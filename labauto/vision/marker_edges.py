@@ -26,14 +26,14 @@ pair the centre comes from) are measured again, along rays:
   fit_ellipses_geometric_batch`, one batch for all markers), and the projected centre comes from
   the centre circle's and the outer edge's conics (:func:`centres_of`,
   :func:`labauto.vision.concentric.projected_centers`);
-* passes (:func:`refine_circles`): the first is a wide, coarse look (every other ray, windows of
-  +-5 px sampled every 0.5 px, direct algebraic fits), since the ring's first guess, the centre
-  circle scaled by 3, can be pixels off under perspective; it only places the next windows. The
-  second measures along every ray with +-3 px windows centred on the first pass's fits, which
-  is the last pass for nearly every marker (its windows sat on their edges). A marker whose
-  windows were still off its edges and whose centre still moved is under strong perspective:
-  it gets wide windows again, pass after pass, until they sit on the edges or the centre stops
-  moving (up to six passes).
+* passes (:func:`refine_circles`): the first is a wide, coarse look (every other ray on the
+  centre circle, windows of +-5 px sampled every 0.5 px, direct algebraic fits), since the
+  ring's first guess, the centre circle scaled by 3, can be pixels off under perspective; it
+  only places the next windows. The second measures along every ray with +-3 px windows
+  centred on the first pass's fits, which is the last pass for nearly every marker (its
+  windows sat on their edges). A marker whose windows were still off its edges and whose centre
+  still moved is under strong perspective: it gets wide windows again, pass after pass, until
+  they sit on the edges or the centre stops moving (up to six passes).
 """
 
 from __future__ import annotations
@@ -164,12 +164,14 @@ def refine_circles(
     centres = np.full((k, 2), np.nan)
     active = np.ones(k, bool)
     tried_inner = np.zeros(k, bool)
+    outer_failed = np.zeros(k, bool)
     for n_pass in range(max_passes if k else 0):
-        measure = _circles_to_measure(active, circles)
+        measure = _circles_to_measure(active, outer_failed)
         tried_inner |= measure[:, 1]
         use = measure.ravel()[rays.key]
-        if n_pass == 0:  # a wide look from the first guesses, on every other ray
-            live = rays.of(use & (np.arange(len(use)) % 2 == 0), FIRST_WINDOW_PX, FIRST_STEP_PX)
+        if n_pass == 0:  # a wide look from the first guesses (every other centre-circle ray)
+            use &= (np.arange(len(use)) % 2 == 0) | (rays.key % 3 != 0)
+            live = rays.of(use, FIRST_WINDOW_PX, FIRST_STEP_PX)
         else:
             live = rays.of(use, WINDOW_PX if n_pass == 1 else FIRST_WINDOW_PX, STEP_PX)
         edge, usable, offset = _measure(grey, guess.reshape(-1, 5), live, min_contrast)
@@ -178,6 +180,7 @@ def refine_circles(
         circles[measure] = fits[measure]
         got = np.isfinite(fits[:, :, 0]) & measure
         guess[got] = fits[got]
+        outer_failed = measure[:, 2] & ~got[:, 2]
         if n_pass == 0 and max_passes > 1:
             continue  # the coarse first look only places the next pass's windows
         todo = np.flatnonzero(active)
@@ -196,15 +199,13 @@ def refine_circles(
     return circles, centres
 
 
-def _circles_to_measure(active: np.ndarray, circles: np.ndarray) -> np.ndarray:
+def _circles_to_measure(active: np.ndarray, outer_failed: np.ndarray) -> np.ndarray:
     """(K, 3) bool: the circles of each marker to measure in the next pass: the centre circle
     and the code ring's outer edge of every active marker, and the ring's inner edge where the
-    outer one has no fit (the centre comes from the centre circle and the outer edge, the
-    best-conditioned pair; the inner edge only stands in for a failed outer one)."""
-    measure = np.zeros(circles.shape[:2], bool)
-    measure[:, 0] = measure[:, 2] = active
-    measure[:, 1] = active & ~np.isfinite(circles[:, 2, 0])
-    return measure
+    outer one was measured and gave no fit (the centre comes from the centre circle and the
+    outer edge, the best-conditioned pair; the inner edge only stands in for a failed outer
+    one)."""
+    return np.column_stack((active, active & outer_failed, active))
 
 
 @dataclass(frozen=True)
