@@ -8,8 +8,12 @@ objects, we first segment obviously elliptical shapes from artifacts using our D
 2. **DES prefilter**: the shape angle D_alpha (eq. 3) with the centroid-inside test
    (:func:`labauto.vision.shape_angle.shape_angles`); only DES go on, so rectangles, lines,
    ring sectors and other artefacts are never fitted.
-3. **Geometric ellipse fit** of every DES of a plausible size (orthogonal distances, Ahn's
-   method, :func:`labauto.vision.ellipse_fit.fit_selected_ellipses`).
+3. **Ellipse fit for the read**: the direct algebraic fit (Halir-Flusser,
+   :func:`labauto.vision.ellipse_fit.fit_ellipses_algebraic_batch`) of every DES of a
+   plausible size whose code ring lies inside the image. On a marker's centre circle it is
+   within 0.03 px of the geometric fit (centre and axes; 0.002 px on average, noisy renders),
+   far less than the read needs (a sector is over 4 px wide on a 10 px marker), at a sixth of
+   the cost; the geometric fit waits for the markers (step 5).
 4. **Code read** in the ellipse's rectified frame: the affine map taking the unit circle onto the
    fitted ellipse takes the marker's plane, to first order, onto the image (up to an unknown
    rotation, which the rotation-invariant code does not care about). The image is sampled
@@ -22,17 +26,19 @@ objects, we first segment obviously elliptical shapes from artifacts using our D
    :mod:`labauto.vision.marker_codes` (even weight, so one wrong bit never gives another id),
    the ink-paper contrast at least ``min_contrast`` and every bit at least ``min_margin`` from
    the threshold (in units of half the contrast): rectangles, plain dots and artefacts get no
-   id.
+   id. The best read of each id is kept.
 5. **Sub-pixel circles and perspective-bias correction**
-   (:mod:`labauto.vision.marker_edges`): the centre circle and the code ring's inner and outer
-   edges are measured again along rays (the moment of each edge profile), each fitted with the
-   geometric ellipse fit, and the image of the common centre of the centre circle and the
-   ring's outer edge (the best-conditioned pair; the inner edge stands in when the outer one
-   failed) is the eigenvector construction of :mod:`labauto.vision.concentric`, exact under
-   any homography. With no usable ring fit, or a correction larger than any perspective makes
-   (``MAX_BIAS_SHARE`` of the semi-minor axis plus ``MAX_BIAS_PX``), the centre is the centre
-   circle's ellipse centre and ``bias_corrected`` is False. ``ellipse`` is the re-measured
-   centre circle.
+   (:mod:`labauto.vision.marker_edges`): the centre circle and the code ring's outer edge are
+   measured again along rays laid out in the read's frame (the moment of each edge profile),
+   each fitted with the geometric ellipse fit (orthogonal distances, Ahn's method), and the
+   image of their common centre (the best-conditioned pair; the ring's inner edge is measured
+   to stand in only where the outer one fails) is the eigenvector construction of
+   :mod:`labauto.vision.concentric`, exact under any homography. With no usable ring fit, or a
+   correction larger than any perspective makes (``MAX_BIAS_SHARE`` of the semi-minor axis
+   plus ``MAX_BIAS_PX``), the centre is the centre circle's ellipse centre and
+   ``bias_corrected`` is False. ``ellipse`` is the re-measured centre circle; where there is
+   none (``correct_bias=False``, or a failed re-measure) it is the geometric fit of the DES
+   contour (:func:`labauto.vision.ellipse_fit.fit_selected_ellipses`).
 
 Markers must be seen from their printed side: a mirrored marker (seen through a transparent
 sheet, or drawn by a map that flips orientation) reads its ring backwards, which is in general
@@ -47,6 +53,7 @@ sub-image (a tracker's window): positions are in that array's pixels.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, fields, replace
 
@@ -56,12 +63,12 @@ import numpy as np
 from labauto.vision.contours import Contours
 from labauto.vision.detector import DetectorParams, extract_contours, validate_params
 from labauto.vision.ellipse import Ellipse
-from labauto.vision.ellipse_fit import fit_selected_ellipses
+from labauto.vision.ellipse_fit import fit_ellipses_algebraic_batch, fit_selected_ellipses
 from labauto.vision.image import as_image
 from labauto.vision.marker_codes import N_BITS, RING_OUTER, decode_words
 from labauto.vision.marker_codes import warm as warm_codes
-from labauto.vision.marker_edges import affine_frames, marker_centers, refine_circles
-from labauto.vision.shape_angle import ShapeAngles, shape_angles
+from labauto.vision.marker_edges import affine_frames, refine_circles
+from labauto.vision.shape_angle import shape_angles
 
 #: Samples per sector along the ring, and the ring radii sampled (centre radii).
 SAMPLES_PER_BIT = 8
@@ -139,7 +146,8 @@ class Marker:
     bias_corrected : bool
         ``center`` comes from the concentric ring fits.
     ring_ellipses : tuple of Ellipse
-        Fits of the code ring's inner and outer edges that were used (may be empty).
+        Fits of the code ring's edges that were used: the outer one, with the inner one before
+        it where it stood in (empty when not ``bias_corrected``).
     """
 
     id: int
@@ -250,138 +258,206 @@ def find_markers(image: np.ndarray, params: MarkerParams = MarkerParams()) -> Ma
 def _sample(
     grey: np.ndarray, centres: np.ndarray, maps: np.ndarray, unit: np.ndarray
 ) -> np.ndarray:
-    """Bilinear grey values at ``centre + map @ unit`` for every frame: (K, M)."""
+    """Bilinear grey values at ``centre + map @ unit`` for every frame: (K, M), float32."""
     m = maps.astype(np.float32)
     u, v = unit[:, 0].astype(np.float32), unit[:, 1].astype(np.float32)
     c = centres.astype(np.float32)
     mx = c[:, :1] + m[:, 0, :1] * u + m[:, 0, 1:] * v
     my = c[:, 1:] + m[:, 1, :1] * u + m[:, 1, 1:] * v
     out = cv2.remap(grey, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return out.astype(np.float64)
+    return out.astype(np.float32)
 
 
-def _circle(radii: tuple[float, ...], n: int) -> np.ndarray:
-    t = 2.0 * np.pi * (np.arange(n) + 0.5) / n
-    return np.concatenate([np.column_stack((r * np.cos(t), r * np.sin(t))) for r in radii])
+@functools.cache
+def _read_points() -> tuple[np.ndarray, tuple[int, int]]:
+    """Unit-circle frame points sampled by the code read: 8 per ink radius, 24 per paper radius
+    and ``N_BITS * SAMPLES_PER_BIT`` per ring radius, in that order, and where the paper and
+    the ring points start."""
+
+    def circle(radii: tuple[float, ...], n: int) -> np.ndarray:
+        t = 2.0 * np.pi * (np.arange(n) + 0.5) / n
+        return np.concatenate([np.column_stack((r * np.cos(t), r * np.sin(t))) for r in radii])
+
+    parts = (
+        circle(INK_RADII, 8),
+        circle(PAPER_RADII, 24),
+        circle(READ_RADII, N_BITS * SAMPLES_PER_BIT),
+    )
+    return np.concatenate(parts), (len(parts[0]), len(parts[0]) + len(parts[1]))
+
+
+def _medians(values: np.ndarray) -> np.ndarray:
+    """Row medians (a sort of short rows: quicker than ``np.median`` here)."""
+    ordered = np.sort(values, axis=1)
+    n = ordered.shape[1]
+    return (ordered[:, (n - 1) // 2].astype(np.float64) + ordered[:, n // 2]) / 2.0
+
+
+def _sector_means(level: np.ndarray) -> np.ndarray:
+    """(K, S, N_BITS) mean level of every sector for every phase p of S: sector k of phase p
+    is ring samples ``k*S + p + 1 .. k*S + p + S - 2`` (the sector without one sample at each
+    end), cyclically."""
+    s = SAMPLES_PER_BIT
+    k, n = level.shape
+    width = s - 2
+    # moving sums over ``width`` samples starting at each sample (cyclic), by cumulative sums
+    cum = np.zeros((k, n + width))
+    np.cumsum(np.concatenate((level, level[:, : width - 1]), axis=1), axis=1, out=cum[:, 1:])
+    sums = cum[:, width:] - cum[:, :n]  # sums[:, j] = level[:, j .. j + width - 1]
+    # the window of phase p, sector k starts at k*S + p + 1
+    return np.roll(sums, -1, axis=1).reshape(k, N_BITS, s).transpose(0, 2, 1) / width
 
 
 def _read_codes(
-    grey: np.ndarray, ellipses: list[Ellipse], params: MarkerParams
+    grey: np.ndarray, rows: np.ndarray, params: MarkerParams
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Ids (-1: no code), scores, code bit-0 directions (rad), bits as read and where read bit 0
-    starts (rad), all in the rectified frames of the ellipses."""
-    k = len(ellipses)
-    centres, maps = affine_frames(ellipses)
+    starts (rad), all in the rectified frames of the ellipse rows ``(cx, cy, a, b, angle)``."""
+    k = len(rows)
+    centres, maps = affine_frames(rows)
     n_ring = N_BITS * SAMPLES_PER_BIT
-    # the levels first: only a candidate with marker contrast has its ring sampled
-    ink = np.median(_sample(grey, centres, maps, _circle(INK_RADII, 8)), axis=1)
-    paper = np.median(_sample(grey, centres, maps, _circle(PAPER_RADII, 24)), axis=1)
+    points, (paper_at, ring_at) = _read_points()
+    samples = _sample(grey, centres, maps, points)  # one remap for all
+    ink = _medians(samples[:, :paper_at])
+    paper = _medians(samples[:, paper_at:ring_at])
     contrast = paper - ink
     lit = np.flatnonzero(np.abs(contrast) >= params.min_contrast)
-    ring = _sample(grey, centres[lit], maps[lit], _circle(READ_RADII, n_ring))
-    ring = ring.reshape(len(lit), len(READ_RADII), n_ring).mean(axis=1)
-    level = np.full((k, n_ring), 0.5)  # candidates without contrast read as undecided
-    level[lit] = (ring - ink[lit, None]) / contrast[lit, None]  # 0 ink .. 1 paper
-    # per phase p: sector k covers samples k*S + p .. k*S + p + S - 1; drop one at each end
+    ids = np.full(k, -1)
+    score = np.zeros(k)
+    bit0 = np.zeros(k)
+    bits = np.zeros((k, N_BITS), bool)
+    start = np.zeros(k)
+    if lit.size == 0:
+        return ids, score, bit0, bits, start
+    ring = samples[lit, ring_at:].reshape(len(lit), len(READ_RADII), n_ring).mean(axis=1)
+    level = (ring - ink[lit, None]) / contrast[lit, None]  # 0 ink .. 1 paper
+    # every phase p at once: (lit, phase, sector) means; the phase with the most decisive
+    # weakest bit wins (the first such phase on a tie)
+    means = _sector_means(level)
+    margins = np.min(np.abs(means - 0.5), axis=2) * 2.0
+    phase = np.argmax(margins, axis=1)
+    margin = margins[np.arange(len(lit)), phase]
+    read = means[np.arange(len(lit)), phase] < 0.5
+    words = (read.astype(np.int64) << np.arange(N_BITS)).sum(axis=1)
+    found, turns = decode_words(words)
+    ok = margin >= params.min_margin
     s = SAMPLES_PER_BIT
-    best_margin = np.full(k, -np.inf)
-    best_bits = np.zeros((k, N_BITS), bool)
-    best_phase = np.zeros(k, np.int64)
-    for p in range(s):
-        rolled = np.roll(level, -p, axis=1).reshape(k, N_BITS, s)[:, :, 1:-1]
-        means = rolled.mean(axis=2)
-        margin = np.min(np.abs(means - 0.5), axis=1) * 2.0
-        better = margin > best_margin
-        best_margin = np.where(better, margin, best_margin)
-        best_bits[better] = means[better] < 0.5
-        best_phase[better] = p
-    words = (best_bits.astype(np.int64) << np.arange(N_BITS)).sum(axis=1)
-    ids, turns = decode_words(words)
-    ok = (np.abs(contrast) >= params.min_contrast) & (best_margin >= params.min_margin)
-    ids = np.where(ok, ids, -1)
-    score = best_margin * np.minimum(np.abs(contrast) * 2.0 / 255.0, 1.0)
+    ids[lit] = np.where(ok, found, -1)
+    score[lit] = margin * np.minimum(np.abs(contrast[lit]) * 2.0 / 255.0, 1.0)
     # read bit i starts at angle (i*S + p) * 2 pi / n_ring; the code's bit 0 is read bit -turns
-    bit0 = ((-turns) % N_BITS * s + best_phase) * 2.0 * np.pi / n_ring
-    start = best_phase * 2.0 * np.pi / n_ring  # where read bit 0 starts
-    return ids, score, bit0, best_bits, start
+    bit0[lit] = ((-turns) % N_BITS * s + phase) * 2.0 * np.pi / n_ring
+    bits[lit] = read
+    start[lit] = phase * 2.0 * np.pi / n_ring  # where read bit 0 starts
+    return ids, score, bit0, bits, start
+
+
+def _plausible(rows: np.ndarray, shape: tuple[int, ...], params: MarkerParams) -> np.ndarray:
+    """(K,) bool: ellipse rows ``(cx, cy, a, b, angle)`` of a centre circle's size (and not
+    flatter than 1:4) whose code ring lies inside the image (False for NaN rows)."""
+    cx, cy, a, b = rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
+    h, w = shape[:2]
+    reach = RING_OUTER * a + 1
+    return (
+        (a >= params.min_radius_px)
+        & (a <= params.max_radius_px)
+        & (b >= 0.25 * a)
+        & (cx - reach >= 0)
+        & (cy - reach >= 0)
+        & (cx + reach <= w - 1)
+        & (cy + reach <= h - 1)
+    )
 
 
 def _candidates(
     grey: np.ndarray, contours: Contours, params: MarkerParams
-) -> tuple[ShapeAngles, list[Ellipse | None], list[int]]:
-    """Shape angles of all contours, the first fits of the DES of a plausible size, and the
-    indices of the fits whose code ring lies inside the image."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """DES centroids of all contours, and the indices and algebraic ellipse rows of the DES of
+    a plausible size whose code ring lies inside the image."""
     angles = shape_angles(contours.points, contours.gradients, contours.offsets, contours.closed)
     des = angles.is_des(params.des_threshold_deg)
     # cheap size test before fitting: the DES's extent from its area
     radius = np.sqrt(np.maximum(angles.area, 0.0) / np.pi)
     des &= (radius >= params.min_radius_px * 0.5) & (radius <= params.max_radius_px * 1.2)
-    fits = fit_selected_ellipses(contours.points, contours.offsets, des, max_iter=10, tol=1e-7)
-    h, w = grey.shape
-    keep = []
-    for k, e in enumerate(fits):
-        if e is None:
-            continue
-        a, b = e.axes
-        if not params.min_radius_px <= a <= params.max_radius_px or b < 0.25 * a:
-            continue
-        reach = RING_OUTER * a + 1
-        cx, cy = e.center
-        if cx - reach < 0 or cy - reach < 0 or cx + reach > w - 1 or cy + reach > h - 1:
-            continue  # the code ring leaves the image
-        keep.append(k)
-    return angles, fits, keep
+    index = np.flatnonzero(des)
+    # the algebraic fit of every contour (cheaper than gathering the DES), good to a small
+    # fraction of a sector for the code read; the geometric fit waits for the markers
+    rows = fit_ellipses_algebraic_batch(contours.points, contours.offsets)[index]
+    keep = _plausible(rows, grey.shape, params)
+    return np.asarray(angles.centroid), index[keep], rows[keep]
 
 
-def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list[Marker]:
-    angles, fits, keep = _candidates(grey, contours, params)
-    if not keep:
-        return []
-    ellipses = [fits[k] for k in keep]
-    pixels = grey.astype(np.float32)  # sampled at sub-pixel positions from here on
-    ids, score, bit0, bits, start = _read_codes(pixels, ellipses, params)
+def _best_reads(ids: np.ndarray, score: np.ndarray) -> list[tuple[int, int]]:
+    """``(id, candidate)`` of the best read of every id found, by id."""
     best: dict[int, int] = {}
     for j, marker_id in enumerate(ids.tolist()):
         if marker_id >= 0 and (marker_id not in best or score[j] > score[best[marker_id]]):
             best[marker_id] = j
-    chosen = sorted(best.items())
-    picked = [j for _, j in chosen]
-    circles = (
-        refine_circles(
-            pixels,
-            [ellipses[j] for j in picked],
-            [bits[j] for j in picked],
-            [float(start[j]) for j in picked],
-            params.min_contrast,
+    return sorted(best.items())
+
+
+def _ellipse(row: list[float]) -> Ellipse:
+    """The ellipse of a row ``[cx, cy, a, b, angle_deg]``."""
+    cx, cy, a, b, angle = row
+    return Ellipse((cx, cy), (a, b), angle)
+
+
+def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list[Marker]:
+    centroids, index, rows = _candidates(grey, contours, params)
+    if not len(index):
+        return []
+    ids, score, bit0, bits, start = _read_codes(grey, rows, params)
+    chosen = _best_reads(ids, score)
+    if not chosen:
+        return []
+    picked = np.array([j for _, j in chosen], np.int64)
+    k = len(picked)
+    circles, centres = np.full((k, 3, 5), np.nan), np.full((k, 2), np.nan)
+    if params.correct_bias:
+        pixels = grey.astype(np.float32)  # sampled at sub-pixel positions from here on
+        circles, centres = refine_circles(
+            pixels, rows[picked], bits[picked], start[picked], params.min_contrast
         )
-        if params.correct_bias
-        else [(None, None, None)] * len(picked)
+    # the geometric fit of the centre circle's contour where the re-measure gave none
+    ellipses = circles[:, 0].copy()
+    need = np.flatnonzero(~np.isfinite(ellipses[:, 0]))
+    if need.size:
+        mask = np.zeros(len(contours), bool)
+        mask[index[picked[need]]] = True
+        first = fit_selected_ellipses(
+            contours.points, contours.offsets, mask, max_iter=10, tol=1e-7
+        )
+        for j in need.tolist():
+            e = first[index[picked[j]]]
+            if e is not None:
+                ellipses[j] = (*e.center, *e.axes, e.angle)
+    keep = np.flatnonzero(_plausible(ellipses, grey.shape, params))  # none for NaN rows
+    # a bias larger than any perspective makes is a failed ring fit
+    bias = np.hypot(*(centres - ellipses[:, :2]).T)
+    corrected = np.isfinite(bias) & (bias <= MAX_BIAS_SHARE * ellipses[:, 3] + MAX_BIAS_PX)
+    centres = np.where(corrected[:, None], centres, ellipses[:, :2])
+    rings = np.where(corrected[:, None, None], circles[:, 1:], np.nan)  # only those used
+    # plain Python values from here on (numpy scalars are slow one at a time)
+    columns = zip(
+        [chosen[j][0] for j in keep.tolist()],
+        centres[keep].tolist(),
+        centroids[index[picked[keep]]].tolist(),
+        ellipses[keep].tolist(),
+        score[picked[keep]].tolist(),
+        np.degrees(bit0[picked[keep]]).tolist(),
+        corrected[keep].tolist(),
+        rings[keep].tolist(),
+        strict=True,
     )
-    out = []
-    centres = marker_centers(circles)
-    for (marker_id, j), (centre_fit, inner, outer), xy in zip(
-        chosen, circles, centres, strict=True
-    ):
-        e = centre_fit if centre_fit is not None else ellipses[j]
-        centre = (float(xy[0]), float(xy[1])) if np.isfinite(xy).all() else None
-        if (
-            centre is not None
-            and np.hypot(centre[0] - e.center[0], centre[1] - e.center[1])
-            > MAX_BIAS_SHARE * e.axes[1] + MAX_BIAS_PX
-        ):
-            centre = None  # a bias that large is a failed ring fit, not perspective
-        ring = tuple(r for r in (inner, outer) if r is not None)
-        cx, cy = angles.centroid[keep[j]]
-        out.append(
-            Marker(
-                id=marker_id,
-                center=centre if centre is not None else e.center,
-                centroid=(float(cx), float(cy)),
-                ellipse=e,
-                score=float(score[j]),
-                rotation_deg=float(np.degrees(bit0[j])),
-                bias_corrected=centre is not None,
-                ring_ellipses=ring if centre is not None else (),
-            )
+    return [
+        Marker(
+            id=marker_id,
+            center=(x, y),
+            centroid=(cx, cy),
+            ellipse=_ellipse(e),
+            score=read_score,
+            rotation_deg=rotation,
+            bias_corrected=ok,
+            ring_ellipses=tuple(_ellipse(r) for r in ring if r[0] == r[0]),  # NaN: no fit
         )
-    return out
+        for marker_id, (x, y), (cx, cy), e, read_score, rotation, ok, ring in columns
+    ]

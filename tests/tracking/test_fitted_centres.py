@@ -77,8 +77,8 @@ def test_fitted_centres_hold_when_a_marker_moves_past_its_first_window(jump):
 def test_fitted_centres_are_unbiased_under_motion_blur(smear):
     """Motion blur (a symmetric smear) widens the edges across the motion beyond the edge
     windows' +-3 px; cut, their profiles pulled the centre toward the first (Canny) fit's,
-    0.08-0.1 px off along the motion. Rays with a wide edge are measured again in a wider
-    window (``marker_edges.PLATEAU_SHARE``)."""
+    0.08-0.1 px off along the motion. The re-measure's first look (``marker_edges.
+    FIRST_WINDOW_PX``, +-5 px) places the later windows on the blurred edges."""
     rng = np.random.default_rng(8)
     truth = {
         4 * r + c: (110.3 + 140 * c + 0.37 * r, 100.6 + 140 * r + 0.21 * c)
