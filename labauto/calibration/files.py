@@ -49,31 +49,3 @@ def write_opencv_yaml(path: str | Path, document: dict) -> Path:
     finally:
         fs.release()
     return path
-
-
-def read_opencv_yaml(path: str | Path) -> dict:
-    """Read a file written by :func:`write_opencv_yaml` (or OpenCV's samples) back."""
-    path = Path(path)
-    if not path.is_file():
-        raise CalibrationFileError(f"{path}: no such calibration file")
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    try:
-        matrix = fs.getNode("camera_matrix").mat()
-        dist = fs.getNode("distortion_coefficients").mat()
-        if matrix is None or dist is None:
-            raise CalibrationFileError(f"{path}: no camera_matrix or distortion_coefficients in it")
-        doc = {
-            "camera_matrix": matrix.tolist(),
-            "dist_coeffs": dist.ravel().tolist(),
-            "image_size": [
-                int(fs.getNode("image_width").real()),
-                int(fs.getNode("image_height").real()),
-            ],
-        }
-        for key in ("rvec", "tvec"):
-            node = fs.getNode(key)
-            if not node.empty():
-                doc[key] = node.mat().ravel().tolist()
-        return doc
-    finally:
-        fs.release()

@@ -119,8 +119,15 @@ def _grid_centres(grey: np.ndarray, board: GridBoard) -> np.ndarray:
         ellipses = [e for e in ellipses if typical / 3 < e.axes[0] < typical * 3]
     if board.type == "circle-grid":
         return np.array([e.center for e in ellipses], np.float64).reshape(-1, 2)
-    ratio = board.inner_diameter_mm / board.diameter_mm
-    ellipses.sort(key=lambda e: e.axes[0])
+    return ring_centres(ellipses, board.inner_diameter_mm / board.diameter_mm)
+
+
+def ring_centres(ellipses: list[Ellipse], ratio: float) -> np.ndarray:
+    """(N, 2) centres of the rings among ``ellipses``: each inner edge paired with the nearest
+    larger ellipse about the same centre whose size is ``ratio`` (inner over outer diameter,
+    within 0.15) times its own; the centre is the two concentric conics' projected centre.
+    A near ellipse of another size (a second contour of the same edge) is passed over."""
+    ellipses = sorted(ellipses, key=lambda e: e.axes[0])
     centres, used = [], set()
     xy = np.array([e.center for e in ellipses]).reshape(-1, 2)
     for i, inner in enumerate(ellipses):
@@ -136,7 +143,7 @@ def _grid_centres(grey: np.ndarray, board: GridBoard) -> np.ndarray:
                 if centre is not None:
                     centres.append(centre)
                     used.update((i, j))
-                break
+                    break
     return np.array(centres, np.float64).reshape(-1, 2)
 
 

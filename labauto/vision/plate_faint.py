@@ -88,6 +88,8 @@ def faint_bodies(
     empty = np.zeros((h, w), np.uint8)
     step = max(1, round(px_per_mm / _WORK_PX_PER_MM))
     ppm = px_per_mm / step
+    if h < step or w < step:
+        return empty  # smaller than one work pixel: nothing faint to find
     # whole blocks of step x step pixels (OpenCV's integer-factor path: ~10x faster); a last
     # partial row or column is left out
     sw, sh = max(w // step, 1), max(h // step, 1)

@@ -332,7 +332,7 @@ class MarkerTracker:
         """Start or move the tracks of the markers found; age (and in time drop) the others."""
         for mid, hit in found.items():
             track = self._tracks.get(mid)
-            if track is None or track.missed > self.coast_frames:
+            if track is None:  # (tracks missed for longer than coast_frames are dropped below)
                 self._tracks[mid] = Track(mid, hit.position, np.zeros(2), hit.radius, index)
             else:
                 follow(track, hit.position, hit.radius, hit.id is not None, index)

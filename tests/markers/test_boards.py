@@ -12,7 +12,9 @@ import yaml
 
 from labauto.calibration.boards_io import BoardFileError, read_board
 from labauto.cli.main import main
+from labauto.vision.board_points import ring_centres
 from labauto.vision.boards import BoardError, board_from_dict
+from labauto.vision.ellipse import Ellipse
 from labauto.vision.marker_codes import RING_INNER, RING_OUTER
 
 
@@ -129,3 +131,13 @@ def test_grid_object_points_follow_opencv_order() -> None:
 def test_missing_board_file_is_named(tmp_path) -> None:
     with pytest.raises(BoardFileError, match=r"nosuch\.yaml: no such board description"):
         read_board(tmp_path / "nosuch.yaml")
+
+
+def test_rings_pair_past_a_second_contour_of_the_inner_edge():
+    inner = Ellipse((100.0, 80.0), (10.0, 9.0), 20.0)
+    duplicate = Ellipse((100.1, 80.0), (10.6, 9.5), 20.0)  # the same edge traced twice
+    outer = Ellipse((100.0, 80.0), (20.0, 18.0), 20.0)
+    lone = Ellipse((300.0, 80.0), (10.0, 9.0), 0.0)  # no ring round it
+    centres = ring_centres([outer, duplicate, lone, inner], ratio=0.5)
+    assert centres.shape == (1, 2)
+    np.testing.assert_allclose(centres[0], (100.0, 80.0), atol=1e-6)
