@@ -123,20 +123,24 @@ def camera_frames(
     items: queue.Queue[tuple[str, Any]] = queue.Queue(maxsize=4)
     stop = threading.Event()
 
+    def offer(item: tuple[str, Any]) -> bool:
+        """Queue ``item`` unless the reader has stopped; False when it has."""
+        while not stop.is_set():
+            try:
+                items.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
     def produce() -> None:
         try:
             for frame in camera:
-                while not stop.is_set():
-                    try:
-                        items.put(("frame", frame), timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
+                if not offer(("frame", frame)):
                     return
-            items.put(("end", None))
+            offer(("end", None))
         except Exception as exc:
-            items.put(("error", exc))
+            offer(("error", exc))
 
     thread = threading.Thread(target=produce, name="labauto-track-camera", daemon=True)
     thread.start()
