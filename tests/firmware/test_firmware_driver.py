@@ -64,15 +64,45 @@ def log() -> Log:
     return Log()
 
 
+def still_steps(robot: GrblRobot) -> bool:
+    """Whether the firmware still carries out motion: 0.1 mm along X and back, within 10 s.
+
+    grbl-sim runs GRBL's stepper "interrupt" in a host thread without the AVR's atomicity; now
+    and then (seen after a feed hold on a loaded host) it stops stepping for good, a soft reset
+    does not bring it back, and every later move waits for an ``ok`` to ``G4 P0`` that never
+    comes. Real GRBL has no such state, so a test that finds it power-cycles the firmware.
+    """
+    try:
+        position = robot.status().position or (0.0, 0.0, 0.0)
+        step = -0.1 if position[0] > -100.0 else 0.1  # away from the nearer end of travel
+        robot.execute(f"G91 G1 X{step:.1f} F6000")
+        robot.execute(f"G1 X{-step:.1f}")
+        robot.execute("G90")
+        return robot.wait_idle(timeout=10.0).state == "Idle"
+    except (DeviceTimeout, UnexpectedReply, GrblAlarm, GrblReset):
+        return False
+
+
+def power_cycle(robot: GrblRobot, firmware: FirmwareBridge) -> None:
+    """Restart the firmware from its EEPROM and reconnect: unlocked and armed at machine zero."""
+    firmware.restart()
+    robot.reconnect()
+    robot.soft_reset()
+    robot.unlock()
+
+
 @pytest.fixture
 def robot(firmware: FirmwareBridge, log: Log) -> Iterator[GrblRobot]:
-    """A connected driver, the machine unlocked where the last test left it, the driver armed."""
+    """A connected driver, the machine unlocked where the last test left it, the driver armed
+    (the firmware power-cycled first if it no longer steps, see :func:`still_steps`)."""
     assert firmware.alive()
     driver = make_robot(firmware.path, log)
     driver.connect()
     try:
         driver.soft_reset()  # whatever the last test left: a clean, latched start
         driver.unlock()
+        if not still_steps(driver):
+            power_cycle(driver, firmware)
         yield driver
     finally:
         with contextlib.suppress(Exception):
@@ -225,31 +255,42 @@ def _hold_once(robot: GrblRobot, target: float) -> tuple[list[int | None], GrblS
     return substates, report
 
 
-def test_feed_hold_goes_hold_1_then_hold_0_and_resumes(robot: GrblRobot) -> None:
-    # grbl-sim sometimes never completes a hold (its stepper "interrupt" is a host thread, not
-    # an AVR interrupt): up to three tries, each after a reset.
+def _moved_on(robot: GrblRobot, held: tuple[float, float, float], need: float) -> bool:
+    return abs((poll_status(robot).position or held)[0] - held[0]) >= need
+
+
+def test_feed_hold_goes_hold_1_then_hold_0_and_resumes(
+    robot: GrblRobot, firmware: FirmwareBridge
+) -> None:
+    # grbl-sim sometimes never completes a hold, or never steps again after the resume (its
+    # stepper "interrupt" is a host thread, not an AVR interrupt): up to three tries, each after
+    # a reset (a power cycle when it no longer steps).
     for attempt, target in enumerate((-30.0, -5.0, -30.0)):
         tries = attempt + 1
         substates, report = _hold_once(robot, target)
         position = report.position or (target, 0.0, 0.0)
-        if substates and substates[-1] == 0 and abs(target - position[0]) > 0.02:
-            break  # held, and before the end of the move (an idle host may finish it first)
+        if not (substates and substates[-1] == 0 and abs(target - position[0]) > 0.02):
+            # not held, or only at the end of the move (an idle host may finish it first)
+            robot.soft_reset()
+            robot.unlock()
+            continue
+        assert substates[0] == 1, (tries, substates[-3:], report.raw)
+        held = robot.status().position
+        time.sleep(0.2)
+        assert robot.status().position == held  # stays put
+        assert held is not None
+        robot.resume()
+        # Resumed: it moves on from where it was held, by half of what was left (at most 0.5
+        # mm: a hold near the end of the move leaves less than that). (Not waited to the end,
+        # for the same grbl-sim reason; the fixture resets afterwards.)
+        need = min(0.5, abs(target - held[0]) / 2)
+        if wait_until(lambda h=held, n=need: _moved_on(robot, h, n), 10.0):
+            return
         robot.soft_reset()
         robot.unlock()
-    assert substates[0] == 1 and substates[-1] == 0, (tries, substates[-3:], report.raw)
-    held = robot.status().position
-    time.sleep(0.2)
-    assert robot.status().position == held  # stays put
-    assert held is not None
-    robot.resume()
-    # Resumed: it moves on from where it was held, by half of what was left (at most 0.5 mm: a
-    # hold near the end of the move leaves less than that). (Not waited to the end, for the
-    # same grbl-sim reason; the fixture resets afterwards.)
-    left = abs(target - held[0])
-    assert left > 0.02, (held, target)  # held before the end of the move
-    need = min(0.5, left / 2)
-    moved = lambda: abs((poll_status(robot).position or held)[0] - held[0]) >= need  # noqa: E731
-    assert wait_until(moved, 10.0)
+        if not still_steps(robot):  # grbl-sim's fault, not the driver's: a fresh firmware
+            power_cycle(robot, firmware)
+    pytest.fail(f"no hold and resume in {tries} tries; last substates {substates[-3:]}")
 
 
 # --------------------------------------------------------------------------- e-stop
