@@ -97,6 +97,10 @@ class PlateParams:
     valley_ratio : float
         Distance-transform dip between two peaks, relative to the lower peak, that separates two
         colonies of a merged body.
+    pair_elongation : float
+        A merged body of one peak whose axis ratio is at least this and whose area is at least
+        the median authentic colony's on the plate (of 3 or more) is counted as two colonies
+        (:func:`labauto.vision.plate_bodies.pair_counts`); 0 turns it off.
     rim_band_mm : float
         Width of the band inside the agar's edge whose background follows the dish's radial
         profile (the meniscus; see :func:`labauto.vision.plate_background.with_radial_rim`);
@@ -150,6 +154,7 @@ class PlateParams:
     mix_residual: float = 24.0
     mix_fraction: float = 0.06
     valley_ratio: float = 0.9
+    pair_elongation: float = 1.3
     reject_ink: bool = True
     drop_at_border: bool = False
     faint_factor: float = 4.0
@@ -175,6 +180,7 @@ class PlateParams:
             "edge_skip_mm",
             "rim_band_mm",
             "faint_factor",
+            "pair_elongation",
         )
         for name in non_negative:
             value = getattr(self, name)

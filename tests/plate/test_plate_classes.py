@@ -27,15 +27,20 @@ def _agar_with(discs: list[tuple[float, float, float]], ellipses=()) -> np.ndarr
 
 
 def _analyse(img: np.ndarray) -> list:
-    params = PlateParams(region=(300.0, 300.0, 290.0), px_per_mm=10.0)
-    return sorted(analyze_plate(img, params).colonies, key=lambda c: c.centroid[0])
+    return _analyse_with(img)
+
+
+def _analyse_with(img: np.ndarray, **params: float) -> list:
+    plate = PlateParams(region=(300.0, 300.0, 290.0), px_per_mm=10.0, **params)  # type: ignore[arg-type]
+    return sorted(analyze_plate(img, plate).colonies, key=lambda c: c.centroid[0])
 
 
 @pytest.mark.parametrize(("gap", "count"), [(20, 1), (32, 2)])
 def test_two_colonies_that_overlap_are_merged_not_authentic(gap: int, count: int) -> None:
     # a round colony beside two of radius 20 px whose centres are ``gap`` px apart: at 20 px the
     # waist is too shallow for the concavity test and the distance transform shows one peak
-    # (the body was read authentic before the elongation limit), at 32 px two peaks
+    # (the body was read authentic before the elongation limit), at 32 px two peaks; with one
+    # single colony on the plate there is no yardstick to count the one-peak body as two
     colonies = _analyse(_agar_with([(150, 300, 20), (400, 300, 20), (400 + gap, 300, 20)]))
     assert [c.klass for c in colonies] == ["authentic", "merged"]
     assert [c.estimated_count for c in colonies] == [1, count]
@@ -47,3 +52,16 @@ def test_authentic_colonies_are_round(axes: tuple[int, int], klass: str) -> None
     (colony,) = _analyse(_agar_with([], [((300, 300), axes, 30.0)]))
     assert colony.klass == klass
     assert colony.estimated_count == 1
+
+
+def test_a_long_one_peak_body_as_large_as_the_plates_colonies_counts_two() -> None:
+    singles = [(120, 150, 20), (120, 450, 20), (480, 450, 20)]
+    pair = [(400, 300, 20), (420, 300, 20)]  # one distance-transform peak, axis ratio ~1.4
+    small = [(250, 150, 9), (259, 150, 9)]  # as long, but smaller than a single colony
+    colonies = _analyse(_agar_with(singles + pair + small))
+    by_place = {(round(c.centroid[0] / 10), round(c.centroid[1] / 10)): c for c in colonies}
+    assert [by_place[(12, 15)].klass, by_place[(48, 45)].klass] == ["authentic", "authentic"]
+    assert (by_place[(41, 30)].klass, by_place[(41, 30)].estimated_count) == ("merged", 2)
+    assert (by_place[(25, 15)].klass, by_place[(25, 15)].estimated_count) == ("merged", 1)
+    off = _analyse_with(_agar_with(singles + pair + small), pair_elongation=0.0)
+    assert sum(c.estimated_count for c in off) == sum(c.estimated_count for c in colonies) - 1
