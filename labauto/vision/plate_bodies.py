@@ -325,7 +325,8 @@ def pair_counts(
     distance transform, so :func:`merged_counts` finds one peak. Such a body is longer than a
     single colony (axis ratio at least ``pair_elongation``; single colonies on the AGAR
     photographs: 1.01-1.21, 5th-95th percentile) and at least as large as the plate's median
-    authentic colony (of ``MIN_SINGLES`` or more); a small or round irregular colony is neither.
+    single colony (``authentic``: the authentic and mixed DES, ``MIN_SINGLES`` or more); a
+    small or round irregular colony is neither.
     Measured on the AGAR photographs: of the one-peak merged bodies, 36 of the 52 that hold two
     or more boxed colonies and 13 of the 255 that hold one or none pass both.
     """

@@ -99,7 +99,7 @@ class PlateParams:
         colonies of a merged body.
     pair_elongation : float
         A merged body of one peak whose axis ratio is at least this and whose area is at least
-        the median authentic colony's on the plate (of 3 or more) is counted as two colonies
+        the plate's median single colony's (authentic or mixed, of 3 or more) counts as two
         (:func:`labauto.vision.plate_bodies.pair_counts`); 0 turns it off.
     rim_band_mm : float
         Width of the band inside the agar's edge whose background follows the dish's radial
