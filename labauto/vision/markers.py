@@ -430,7 +430,10 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
             e = first[index[picked[j]]]
             if e is not None:
                 ellipses[j] = (*e.center, *e.axes, e.angle)
-    keep = np.flatnonzero(_plausible(ellipses, grey.shape, params))  # none for NaN rows
+    # the size and the ring's room were judged on the fit the code was read in (a second
+    # test here would drop a marker read at the border, or at the least radius, for a few
+    # hundredths of a pixel between the fits); only a marker with no fit at all is dropped
+    keep = np.flatnonzero(np.isfinite(ellipses[:, 0]))
     # a bias larger than any perspective makes is a failed ring fit
     bias = np.hypot(*(centres - ellipses[:, :2]).T)
     corrected = np.isfinite(bias) & (bias <= MAX_BIAS_SHARE * ellipses[:, 3] + MAX_BIAS_PX)

@@ -118,3 +118,15 @@ def test_json_form_and_the_public_api(tmp_path) -> None:
 def test_unknown_option_is_named() -> None:
     with pytest.raises(ValueError, match="nosuch"):
         detect_markers(np.zeros((50, 50), np.uint8), nosuch=1)
+
+
+def test_a_marker_read_at_the_border_is_kept_whether_or_not_its_bias_is_corrected() -> None:
+    # the code ring's reach (3 radii + 1 px) within a tenth of a pixel of the image's edge: the
+    # read's fit finds the ring inside; the re-measured circle, a little larger, must not then
+    # drop the marker (correct_bias=False reports it)
+    for x in np.arange(127.9, 128.35, 0.05):
+        img = np.full((120, 160), 200.0)
+        draw_marker(img, 41, (float(x), 60.0), 10.0, ink=40.0)
+        image = finish(img, blur_sigma=1.0, noise_sigma=0.0, rng=np.random.default_rng(1))
+        plain = [m.id for m in detect_markers(image, correct_bias=False)]
+        assert [m.id for m in detect_markers(image)] == plain, x
