@@ -146,8 +146,8 @@ class Marker:
     bias_corrected : bool
         ``center`` comes from the concentric ring fits.
     ring_ellipses : tuple of Ellipse
-        Fits of the code ring's edges that were used: the outer one, with the inner one before
-        it where it stood in (empty when not ``bias_corrected``).
+        The fit of the code ring's edge that ``center`` came from: the outer edge, or the inner
+        one where it stood in for a failed outer one (empty when not ``bias_corrected``).
     """
 
     id: int
@@ -438,7 +438,10 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
     bias = np.hypot(*(centres - ellipses[:, :2]).T)
     corrected = np.isfinite(bias) & (bias <= MAX_BIAS_SHARE * ellipses[:, 3] + MAX_BIAS_PX)
     centres = np.where(corrected[:, None], centres, ellipses[:, :2])
-    rings = np.where(corrected[:, None, None], circles[:, 1:], np.nan)  # only those used
+    # the ring fit the centre came from (:func:`~labauto.vision.marker_edges.centres_of`): the
+    # outer edge, or the inner one where it stood in for a failed outer one (finite wherever
+    # the centre was corrected)
+    rings = np.where(np.isfinite(circles[:, 2, :1]), circles[:, 2], circles[:, 1])
     # plain Python values from here on (numpy scalars are slow one at a time)
     columns = zip(
         [chosen[j][0] for j in keep.tolist()],
@@ -460,7 +463,7 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
             score=read_score,
             rotation_deg=rotation,
             bias_corrected=ok,
-            ring_ellipses=tuple(_ellipse(r) for r in ring if r[0] == r[0]),  # NaN: no fit
+            ring_ellipses=(_ellipse(ring),) if ok else (),
         )
         for marker_id, (x, y), (cx, cy), e, read_score, rotation, ok, ring in columns
     ]
