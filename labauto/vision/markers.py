@@ -228,7 +228,9 @@ def detect_markers(image: np.ndarray, **options: object) -> list[Marker]:
     Parameters
     ----------
     image : np.ndarray
-        HxW grey or HxWx3 BGR image (uint8, or float on a 0-255 scale); any sub-image works.
+        HxW grey or HxWx3 BGR (HxWx4 BGRA) image, read by the rules of
+        :func:`labauto.vision.image.as_image` (uint8, or float on a 0-1 or 0-255 scale); any
+        sub-image works.
     **options
         Fields of :class:`MarkerParams`.
 
