@@ -13,7 +13,8 @@ pair the centre comes from) are measured again, along rays:
   are never used; the same sector rays serve the ring's inner (2) edge, which is measured only
   where the outer one gives no fit and then stands in for it;
 * along each ray the image is sampled (bilinear) every 0.25 px over a window of +-3 px about the
-  expected edge (less where the neighbouring edge is closer);
+  expected edge (+-5 px in the first pass and in a third or later one, see below; less where
+  the neighbouring edge is closer);
 * the edge is where the profile's area says it is (the moment method): with the profile
   normalised from 0 at the window's start to 1 at its end (each end the mean of its first or
   last three samples), the step lies ``sum((1 - n_i) * ds)`` after the window's start. For a
@@ -30,10 +31,12 @@ pair the centre comes from) are measured again, along rays:
   centre circle, windows of +-5 px sampled every 0.5 px, direct algebraic fits), since the
   ring's first guess, the centre circle scaled by 3, can be pixels off under perspective; it
   only places the next windows. The second measures along every ray with +-3 px windows
-  centred on the first pass's fits, which is the last pass for nearly every marker (its
-  windows sat on their edges). A marker whose windows were still off its edges and whose centre
-  still moved is under strong perspective: it gets wide windows again, pass after pass, until
-  they sit on the edges or the centre stops moving (up to six passes).
+  centred on the first pass's fits (an inner edge standing in, which the first pass did not
+  measure, on its first guess, the centre circle scaled by 2), which is the last pass for
+  nearly every marker (its windows sat on their edges). A marker whose windows were still off
+  its edges and whose centre still moved is under strong perspective: it gets wide windows
+  again, pass after pass, until they sit on the edges or the centre stops moving (up to six
+  passes).
 """
 
 from __future__ import annotations

@@ -146,8 +146,8 @@ class Marker:
     bias_corrected : bool
         ``center`` comes from the concentric ring fits.
     ring_ellipses : tuple of Ellipse
-        Fits of the code ring's edges that were used: the outer one, with the inner one before
-        it where it stood in (empty when not ``bias_corrected``).
+        The fit of the code ring's edge that ``center`` came from: the outer edge, or the inner
+        one where it stood in for a failed outer one (empty when not ``bias_corrected``).
     """
 
     id: int
@@ -228,7 +228,9 @@ def detect_markers(image: np.ndarray, **options: object) -> list[Marker]:
     Parameters
     ----------
     image : np.ndarray
-        HxW grey or HxWx3 BGR image (uint8, or float on a 0-255 scale); any sub-image works.
+        HxW grey or HxWx3 BGR (HxWx4 BGRA) image, read by the rules of
+        :func:`labauto.vision.image.as_image` (uint8, or float on a 0-1 or 0-255 scale); any
+        sub-image works.
     **options
         Fields of :class:`MarkerParams`.
 
@@ -430,12 +432,18 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
             e = first[index[picked[j]]]
             if e is not None:
                 ellipses[j] = (*e.center, *e.axes, e.angle)
-    keep = np.flatnonzero(_plausible(ellipses, grey.shape, params))  # none for NaN rows
+    # the size and the ring's room were judged on the fit the code was read in (a second
+    # test here would drop a marker read at the border, or at the least radius, for a few
+    # hundredths of a pixel between the fits); only a marker with no fit at all is dropped
+    keep = np.flatnonzero(np.isfinite(ellipses[:, 0]))
     # a bias larger than any perspective makes is a failed ring fit
     bias = np.hypot(*(centres - ellipses[:, :2]).T)
     corrected = np.isfinite(bias) & (bias <= MAX_BIAS_SHARE * ellipses[:, 3] + MAX_BIAS_PX)
     centres = np.where(corrected[:, None], centres, ellipses[:, :2])
-    rings = np.where(corrected[:, None, None], circles[:, 1:], np.nan)  # only those used
+    # the ring fit the centre came from (:func:`~labauto.vision.marker_edges.centres_of`): the
+    # outer edge, or the inner one where it stood in for a failed outer one (finite wherever
+    # the centre was corrected)
+    rings = np.where(np.isfinite(circles[:, 2, :1]), circles[:, 2], circles[:, 1])
     # plain Python values from here on (numpy scalars are slow one at a time)
     columns = zip(
         [chosen[j][0] for j in keep.tolist()],
@@ -457,7 +465,7 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
             score=read_score,
             rotation_deg=rotation,
             bias_corrected=ok,
-            ring_ellipses=tuple(_ellipse(r) for r in ring if r[0] == r[0]),  # NaN: no fit
+            ring_ellipses=(_ellipse(ring),) if ok else (),
         )
         for marker_id, (x, y), (cx, cy), e, read_score, rotation, ok, ring in columns
     ]

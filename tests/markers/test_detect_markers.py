@@ -118,3 +118,36 @@ def test_json_form_and_the_public_api(tmp_path) -> None:
 def test_unknown_option_is_named() -> None:
     with pytest.raises(ValueError, match="nosuch"):
         detect_markers(np.zeros((50, 50), np.uint8), nosuch=1)
+
+
+def test_a_marker_read_at_the_border_is_kept_whether_or_not_its_bias_is_corrected() -> None:
+    # the code ring's reach (3 radii + 1 px) within a tenth of a pixel of the image's edge: the
+    # read's fit finds the ring inside; the re-measured circle, a little larger, must not then
+    # drop the marker (correct_bias=False reports it)
+    for x in np.arange(127.9, 128.35, 0.05):
+        img = np.full((120, 160), 200.0)
+        draw_marker(img, 41, (float(x), 60.0), 10.0, ink=40.0)
+        image = finish(img, blur_sigma=1.0, noise_sigma=0.0, rng=np.random.default_rng(1))
+        plain = [m.id for m in detect_markers(image, correct_bias=False)]
+        assert [m.id for m in detect_markers(image)] == plain, x
+
+
+def test_ring_ellipses_hold_only_the_ring_fit_the_centre_came_from(monkeypatch) -> None:
+    from labauto.vision import markers as mk
+
+    image, _centre = _one_marker(tilt=30.0)
+    real = mk.refine_circles
+
+    def with_inner_too(*args, **kwargs):
+        # as when the coarse first look missed the outer edge (so the inner one was measured
+        # too) and the next pass found it: both ring edges have fits, the centre uses the outer
+        circles, centres = real(*args, **kwargs)
+        circles[:, 1] = circles[:, 0]
+        circles[:, 1, 2:4] *= 2.0
+        return circles, centres
+
+    monkeypatch.setattr(mk, "refine_circles", with_inner_too)
+    (m,) = detect_markers(image)
+    assert m.bias_corrected
+    (ring,) = m.ring_ellipses
+    assert ring.axes[0] > 2.5 * m.ellipse.axes[0]  # the outer edge
