@@ -115,26 +115,32 @@ class Association:
             )
         claimed = eligible.sum(axis=0)
         to_read: set[int] = set()
-        for row in np.flatnonzero(missed == 0):
-            options = np.flatnonzero(eligible[row])
-            if len(options) == 0:
-                continue
-            distance = euclid[row, options]
-            order = np.argsort(distance)
-            best = int(options[order[0]])
-            clear = len(options) == 1 or distance[order[1]] > 2.0 * distance[order[0]] + 2.0
-            if clear and claimed[best] == 1:
-                found[tracks[row].id] = candidates[best]
-            else:
-                self.stats.ambiguous += 1
-                to_read.update(np.flatnonzero(box[row] <= half[row]).tolist())
-        taken = list(found.values())
-        coasting = np.flatnonzero(eligible[missed > 0].any(axis=0)) if len(tracks) else []
-        to_read.update(k for k in coasting if not _near_any(positions[k], taken))
+        # tracks seen last frame with a candidate: the nearest one is theirs when it is clear (no
+        # other within twice its distance + 2 px) and no other track claims it
+        rows = np.flatnonzero((missed == 0) & eligible.any(axis=1))
+        if rows.size:
+            distance = np.where(eligible[rows], euclid[rows], np.inf)
+            nearest = np.argsort(distance, axis=1, kind="stable")[:, :2]
+            best = nearest[:, 0]
+            d1 = distance[np.arange(rows.size), best]
+            d2 = (
+                distance[np.arange(rows.size), nearest[:, 1]]
+                if nearest.shape[1] > 1
+                else np.full(rows.size, np.inf)
+            )
+            taken_clearly = (d2 > 2.0 * d1 + 2.0) & (claimed[best] == 1)
+            for row, k in zip(rows[taken_clearly], best[taken_clearly], strict=True):
+                found[tracks[int(row)].id] = candidates[int(k)]
+            unclear = rows[~taken_clearly]
+            self.stats.ambiguous += int(unclear.size)
+            if unclear.size:
+                near = box[unclear] <= half[unclear, None]
+                to_read.update(np.flatnonzero(near.any(axis=0)).tolist())
+        quiet = ~_near_any(positions, list(found.values()))  # not in a found marker's ring
+        if len(tracks):
+            to_read.update(np.flatnonzero(eligible[missed > 0].any(axis=0) & quiet).tolist())
         if full:
-            for k in np.flatnonzero((claimed == 0) & whole).tolist():
-                if not _near_any(positions[k], taken):
-                    to_read.add(k)
+            to_read.update(np.flatnonzero((claimed == 0) & whole & quiet).tolist())
         return [candidates[k] for k in sorted(to_read)]
 
     def take_coded(
@@ -185,11 +191,15 @@ def _group_by_id(observed: list[Obs]) -> dict[int, list[Obs]]:
     return groups
 
 
-def _near_any(point: np.ndarray, found: list[Obs]) -> bool:
-    """True when ``point`` lies within the code ring of a marker already found (its sectors)."""
-    return any(
-        float(np.hypot(*(point - obs.position))) <= QUIET_RADIUS * obs.radius for obs in found
-    )
+def _near_any(points: np.ndarray, found: list[Obs]) -> np.ndarray:
+    """(n,) bool: each of ``points`` (n, 2) lies within the code ring of a marker already
+    found (its sectors)."""
+    if not found or not len(points):
+        return np.zeros(len(points), bool)
+    centres = np.array([obs.position for obs in found], np.float64)
+    reach = QUIET_RADIUS * np.array([obs.radius for obs in found], np.float64)
+    delta = np.asarray(points, np.float64)[:, None, :] - centres[None, :, :]
+    return (np.hypot(delta[..., 0], delta[..., 1]) <= reach[None, :]).any(axis=1)
 
 
 def _inside(point: np.ndarray, rect: Rect) -> bool:
