@@ -18,6 +18,7 @@ from labauto.vision.plate_params import PlateParams
 
 MIN_MERGED_COUNT = 1  # a body that is not a DES but shows one peak: one colony, not pickable
 PAD = 3  # margin (px) around a body's mask; bodies this close to the usable border are dropped
+MIN_SINGLES = 3  # single colonies a plate needs before their median area is a yardstick
 _DISC5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
 _GAP = 2  # empty canvas rows between two bodies' crops (the 5x5 filters reach 2 px)
 
@@ -312,8 +313,6 @@ def merged_counts(bodies: Bodies, which: np.ndarray, valley_ratio: float) -> np.
         counts[body[lo]] = max(MIN_MERGED_COUNT, len(kept))
     return counts
 
-
-MIN_SINGLES = 3  # authentic colonies a plate needs before their median area is a yardstick
 
 
 def pair_counts(
