@@ -314,7 +314,6 @@ def merged_counts(bodies: Bodies, which: np.ndarray, valley_ratio: float) -> np.
     return counts
 
 
-
 def pair_counts(
     bodies: Bodies, counts: np.ndarray, authentic: np.ndarray, pair_elongation: float
 ) -> np.ndarray:
