@@ -373,6 +373,20 @@ def _draw_des(
     cover[y0:y1, x0:x1] |= alpha > 0.5
 
 
+def _draw_ring_edge(canvas: np.ndarray, des: _Des, darker: float, width_px: float) -> None:
+    """Darken a colony's edge by ``darker`` grey levels over a band ``width_px`` wide.
+
+    The band is a Gaussian profile across the boundary, centred just inside it: the thin dark
+    rim of a translucent colony whose inside is nearly the agar's colour (AGAR plate 510).
+    """
+    x0, y0, x1, y1 = _roi(des.cx, des.cy, des.bound + 2.0 + width_px, canvas.shape[:2])
+    xs, ys = _grid(x0, y0, x1, y1)
+    rho, t = des.local(xs, ys)
+    edge_dist = (1.0 - rho) * math.sqrt(des.a * des.b) * des.radius_factor(t)
+    band = np.exp(-(((edge_dist - 0.5 * width_px) / (0.5 * width_px)) ** 2)).astype(np.float32)
+    canvas[y0:y1, x0:x1] -= darker * band[..., None]
+
+
 def _stroke_alpha(
     shape: tuple[int, int], pts: np.ndarray, thickness: int, closed: bool = False
 ) -> tuple[np.ndarray, int, int]:
@@ -481,6 +495,7 @@ def generate_plate(
     colony_scale: float = 1.0,
     faint_fraction: float = 0.0,
     faint_contrast: float = 0.25,
+    ring_edge: float = 0.0,
     n_meniscus: int = 0,
     lid_label: bool = False,
 ) -> tuple[np.ndarray, PlateTruth]:
@@ -513,6 +528,10 @@ def generate_plate(
         Share (0-1] of a faint colony's colour difference from the agar that is drawn: 0.25 gives
         10-25 grey levels of contrast, 0.08 the 3-8 levels of large translucent colonies on pale
         agar (the AGAR photographs).
+    ring_edge : float
+        Grey levels by which a faint colony's edge is drawn darker (a band of ~0.4 mm): with a
+        small ``faint_contrast``, the ring colonies of the AGAR photographs, whose inside is
+        nearly the agar's colour (0 draws none).
     n_meniscus : int
         Authentic colonies drawn touching the meniscus (their centre half a radius inside the
         agar's edge, cut by it).
@@ -542,6 +561,8 @@ def generate_plate(
             f"colony_scale must be > 0, faint_fraction in [0, 1] and n_meniscus >= 0, got "
             f"{colony_scale}, {faint_fraction}, {n_meniscus}"
         )
+    if not ring_edge >= 0:
+        raise ValueError(f"ring_edge must be >= 0, got {ring_edge}")
     if not 0 < faint_contrast <= 1:
         raise ValueError(f"faint_contrast must be in (0, 1], got {faint_contrast}")
     rng = np.random.default_rng(seed)
@@ -654,7 +675,8 @@ def generate_plate(
     for kind, des in singles:
         near = kind == "authentic" and rng.uniform() < 0.2
         colour = _pick_colour(rng, agar_rgb, near_agar=near)
-        if kind == "authentic" and faint_fraction > 0 and rng.uniform() < faint_fraction:
+        faint = kind == "authentic" and faint_fraction > 0 and rng.uniform() < faint_fraction
+        if faint:
             colour = agar_rgb + faint_contrast * (colour - agar_rgb)  # faint and translucent
             near = True
         style = ""
@@ -667,6 +689,8 @@ def generate_plate(
             colours = [colour]
         body_cover = np.zeros_like(cover)
         _draw_des(canvas, body_cover, des, colour_of, rng)
+        if faint and ring_edge > 0:
+            _draw_ring_edge(canvas, des, ring_edge, 4.0 * k)
         body_cover &= dist < radius  # a colony at the meniscus is cut by the agar's edge
         cover |= body_cover
         truth = _truth_from_mask(len(colonies), kind, body_cover, [des], colours, style, near)

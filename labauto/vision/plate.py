@@ -22,17 +22,19 @@ Pipeline and the choices it makes where the paper leaves room:
 2. **Objects** (paper eq. 1, with no knowledge of the agar's colour). The background is
    estimated from the dish itself (:mod:`labauto.vision.plate_background`): medians over cells
    of ~0.8 mm (a ~25 mm and a ~4 mm window) mark what is not agar, a normalised Gaussian
-   convolution of the rest gives the local agar colour, and the outer ``rim_band_mm`` follow
-   the dish's radial profile (the meniscus). A pixel is foreground when its summed squared
-   deviation from the background over B, G, R (optionally weighted) exceeds ``t``
-   (``color_threshold``, or a multiple of the agar's noise); lines thinner than ``open_mm``
-   are opened away so colonies touching them come apart, and fragments of thick strokes are
-   dropped. Outer contours of all bodies, also those lying in another's hole, are traced in
-   the 8-neighbourhood (OpenCV). The gradient at each contour point is a 5x5 Sobel of the
-   deviation image: it points into every object, whatever its colour. D_alpha, the centroid and
-   the centroid-inside test come from :func:`labauto.vision.shape_angle.shape_angles`,
-   vectorised over all contours. ``method="detector"`` uses
-   :func:`labauto.vision.detector.detect` instead (slower).
+   convolution of the rest gives the local agar colour, and the outer ``rim_band_mm`` follow the
+   dish's radial profile (the meniscus). A pixel is foreground when its summed squared deviation
+   from the background over B, G, R (optionally weighted) exceeds ``t`` (``color_threshold``, or
+   a multiple of the agar's noise). Faint colonies (a smoothed departure from a coarse
+   background, :mod:`labauto.vision.plate_faint`) and ring colonies (a round edge with little
+   body inside, by the circular Hough transform, :mod:`labauto.vision.plate_rings`) are added to
+   that foreground. Lines thinner than ``open_mm`` are opened away so colonies touching them
+   come apart, and fragments of thick strokes are dropped. Outer contours of all bodies, also
+   those lying in another's hole, are traced in the 8-neighbourhood (OpenCV). The gradient at
+   each contour point is a 5x5 Sobel of the deviation image: it points into every object,
+   whatever its colour. D_alpha, the centroid and the centroid-inside test come from
+   :func:`labauto.vision.shape_angle.shape_angles`, vectorised over all contours.
+   ``method="detector"`` uses :func:`labauto.vision.detector.detect` instead (slower).
 3. **Artefacts** are dropped, in this order: ``area < min_colony_area_px`` (dust) or
    ``> max_colony_area_px``; mean width ``2 * area / perimeter < min_width_px`` (scratches, thin
    pen strokes: a disc of radius r gives r, a strip of width w gives w); elongation
@@ -40,7 +42,8 @@ Pipeline and the choices it makes where the paper leaves room:
    strokes; the paper's DES limit is about 1:4); area above ``max_fill_ratio`` times the largest
    inscribed disc (curved or closed pen writing); printed or written ink (black or blue, stroke-
    shaped, dot-sized or dotted: :mod:`labauto.vision.plate_ink`). The body's mask is its filled
-   contour restricted to the foreground (a loop of ink is not solid) and closed with a 5x5 disc.
+   contour restricted to the foreground (a loop of ink is not solid) and closed with a 5x5 disc;
+   holes under a tenth of it are filled (translucent centres, ``plate_bodies.HOLE_SHARE``).
 4. **Classes.** Authentic: a DES, i.e. centroid inside and D_alpha (median by default) below
    ``des_threshold_deg``, and no waist: the deepest concavity (distance from the convex hull)
    is below ``max_concavity`` times the inscribed radius. D_alpha alone does not separate a
@@ -103,6 +106,7 @@ from labauto.vision.plate_bodies import (
 from labauto.vision.plate_faint import faint_bodies
 from labauto.vision.plate_ink import ink_bodies
 from labauto.vision.plate_params import Circle, PlateParams
+from labauto.vision.plate_rings import ring_bodies
 from labauto.vision.plate_scale import WorkingCopy, image_scale, pixel_params, working_copy
 from labauto.vision.shape_angle import shape_angles
 
@@ -494,6 +498,8 @@ def _objects_by_segmentation(
             margin_mm=params.rim_band_mm,
         )
         fg = cv2.bitwise_or(fg, faint)
+    if params.find_rings:
+        fg = ring_bodies(roi, usable, fg, float(params.px_per_mm or 1.0))
     if params.open_mm > 0:
         # lines thinner than open_mm (the lid's and the wall's edges, scratches, hairs) go, so
         # colonies touching them come apart from them

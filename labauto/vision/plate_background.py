@@ -144,8 +144,8 @@ def hysteresis(dev: np.ndarray, usable: np.ndarray, high: float, low: float) -> 
     return keep[labels]
 
 
-_RIM_SECTORS = 36  # sectors of 10 degrees: the radial profile is a median over each
-_RIM_ANGLES = 720  # angles sampled round the band (20 per sector)
+_RIM_SECTORS = 18  # sectors of 20 degrees: the radial profile is a median over each
+_RIM_ANGLES = 720  # angles sampled round the band (40 per sector)
 
 
 def with_radial_rim(
@@ -157,8 +157,12 @@ def with_radial_rim(
     or dark ring), faster than the cell estimate can follow; eq. 1 then sees the ring as one
     body that swallows every colony touching it. The meniscus is (nearly) the same all round,
     so the band is unwrapped to polar coordinates (``cv2.remap``, 1 px per radius step, 720
-    angles) and, in each 10-degree sector, the median over the angles at every radius is the
-    background there: colonies cover far less than half of a sector's arc at any radius.
+    angles) and, in each 20-degree sector, the median over the angles at every radius is the
+    background there: colonies cover less than half of a sector's arc at any radius (the arc
+    is ~14 mm at the edge of a 90 mm dish). Sectors of 10 degrees took colonies of 7 mm and
+    more in the band for the background and cut them into crescents; with 20 degrees, AGAR F1
+    0.842 -> 0.845, median count error 16.7 -> 14.0 %, phone-counts 2.9 -> 2.7 % (12 sectors:
+    F1 0.845, 16.2 % and 3.1 %).
     Sector medians are interpolated between sector centres (cyclically), looked up at every
     pixel of the band, and blended in over the outer ``band_px`` of the circle
     ``rim = (cx, cy, r)`` (full weight in the outer two thirds of the band, ramping over its

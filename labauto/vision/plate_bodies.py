@@ -18,6 +18,7 @@ from labauto.vision.plate_params import PlateParams
 
 MIN_MERGED_COUNT = 1  # a body that is not a DES but shows one peak: one colony, not pickable
 PAD = 3  # margin (px) around a body's mask; bodies this close to the usable border are dropped
+HOLE_SHARE = 0.1  # a hole under this share of its body's filled contour is part of the body
 MIN_SINGLES = 3  # single colonies a plate needs before their median area is a yardstick
 _DISC5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
 _GAP = 2  # empty canvas rows between two bodies' crops (the 5x5 filters reach 2 px)
@@ -110,10 +111,15 @@ def measure_bodies(
     Contours failing a moment test are counted in ``rejected``; the others become bodies.
     A body's mask is its filled contour, restricted to the foreground ``fg`` (so a closed loop
     of pen ink is not taken for a solid body) and closed with a 5x5 disc (so a crack of a pixel
-    or two where two species' colours meet at the edge does not read as a waist). Strokes are
-    flagged in ``stroke`` (and counted). The concavity (the waist test of step 4) is measured
-    only for the contours where ``need_concavity`` is true (``inf`` elsewhere): the caller
-    leaves out those that cannot be a DES anyway (centroid outside or D_alpha too large).
+    or two where two species' colours meet at the edge does not read as a waist); a hole under
+    ``HOLE_SHARE`` (a tenth) of the filled contour is filled again. Colonies with a translucent
+    centre of the agar's colour have such holes, and the distance transform round a hole has a
+    ring of peaks that step 5 counted as several colonies (AGAR plate 14380: 44 -> 30 found, 34
+    boxed); the hole of a pen loop is most of it. Measured on the AGAR photographs: F1 0.845 ->
+    0.849, median count error 14.0 -> 12.5 %; a share of 0.05 gives the same, 0.25 F1 0.843.
+    Strokes are flagged in ``stroke`` (and counted). The concavity (the waist test of step 4) is
+    measured only for the contours where ``need_concavity`` is true (``inf`` elsewhere): the
+    caller leaves out those that cannot be a DES anyway (centroid outside or D_alpha too large).
     """
     survivors, elongations = [], []
     for k, contour in enumerate(contours):
@@ -155,7 +161,8 @@ def measure_bodies(
         fg_canvas = np.zeros(canvas, np.uint8)
         for r, t, lft, h, w in zip(row, top, left, height, width, strict=True):
             fg_canvas[r : r + h, :w] = fg[t : t + h, lft : lft + w]
-        mask = cv2.morphologyEx(cv2.min(mask, fg_canvas), cv2.MORPH_CLOSE, _DISC5)
+        solid = cv2.morphologyEx(cv2.min(mask, fg_canvas), cv2.MORPH_CLOSE, _DISC5)
+        mask = _small_holes_filled(mask, solid, row, row_body)
     dt = cv2.distanceTransform(mask, cv2.DIST_L2, 3)
     r_in = np.maximum.reduceat(dt.max(axis=1), row).astype(np.float64)
     area = np.add.reduceat(np.count_nonzero(mask, axis=1), row).astype(np.float64)
@@ -180,6 +187,23 @@ def measure_bodies(
         index, top, left, height, width, row, row_body, mask, dt, area, r_in, stroke, concavity,
         np.asarray(elongations, float),
     )  # fmt: skip
+
+
+def _small_holes_filled(
+    filled: np.ndarray, solid: np.ndarray, row: np.ndarray, row_body: np.ndarray
+) -> np.ndarray:
+    """``solid`` with every hole of a body under ``HOLE_SHARE`` of its filled contour filled."""
+    holes = cv2.compare(filled, solid, cv2.CMP_GT)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(holes, connectivity=4)
+    if n <= 1:
+        return solid
+    body_area = np.add.reduceat(np.count_nonzero(filled, axis=1), row)
+    owner = row_body[stats[1:, cv2.CC_STAT_TOP]]
+    small = np.zeros(n, bool)
+    small[1:] = stats[1:, cv2.CC_STAT_AREA] < HOLE_SHARE * body_area[owner]
+    out = solid.copy()
+    out[small[labels]] = 1
+    return out
 
 
 def mix_scores(

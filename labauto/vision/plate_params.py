@@ -110,6 +110,9 @@ class PlateParams:
         background this many times the agar's own is foreground; 0 turns the pass off.
     faint_min_diameter_mm, faint_max_diameter_mm : float
         Sizes (as discs) of the faint bodies kept.
+    find_rings : bool
+        Ring colonies (:mod:`labauto.vision.plate_rings`): round edges with little body inside,
+        found by the circular Hough transform; False turns the pass off.
     drop_at_border : bool
         Drop bodies within 3 px of the usable area's border (cut by it). False (default): a
         colony at the meniscus is found and counted; picking keeps its own distance from the
@@ -160,6 +163,7 @@ class PlateParams:
     faint_factor: float = 4.0
     faint_min_diameter_mm: float = 2.0
     faint_max_diameter_mm: float = 12.0
+    find_rings: bool = True
     rim_band_mm: float = 4.0
     detector: DetectorParams = field(default_factory=lambda: DetectorParams(method="color"))
 

@@ -75,7 +75,8 @@ def test_large_translucent_colonies_come_from_the_faint_pass() -> None:
             artefacts=False,
         )
         for faint in (True, False):
-            params = PlateParams(faint_factor=4.0 if faint else 0.0)
+            # the ring pass off in both: it finds some of these colonies by their edge
+            params = PlateParams(faint_factor=4.0 if faint else 0.0, find_rings=False)
             score = score_plate(truth, analyze_plate(img, params).colonies)
             assert score.false_positives == 0
             found[faint] += score.found
