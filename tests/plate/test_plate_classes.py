@@ -65,3 +65,22 @@ def test_a_long_one_peak_body_as_large_as_the_plates_colonies_counts_two() -> No
     assert (by_place[(25, 15)].klass, by_place[(25, 15)].estimated_count) == ("merged", 1)
     off = _analyse_with(_agar_with(singles + pair + small), pair_elongation=0.0)
     assert sum(c.estimated_count for c in off) == sum(c.estimated_count for c in colonies) - 1
+
+
+def test_a_colony_with_a_translucent_centre_is_one_colony(monkeypatch: pytest.MonkeyPatch) -> None:
+    # a colony of radius 40 px whose centre (radius 7 px, 3 % of it) is the agar's colour
+    img = _agar_with([(300.0, 300.0, 40.0)])
+    cv2.circle(img, (300, 300), 7, AGAR_BGR, -1, cv2.LINE_AA)
+    (colony,) = _analyse(img)
+    assert colony.estimated_count == 1
+    assert colony.klass in ("authentic", "mixed")  # a DES (the dome test sees two colours)
+    # without the hole filled, the body reads as a loop of ink and is dropped
+    monkeypatch.setattr("labauto.vision.plate_bodies.HOLE_SHARE", 0.0)
+    assert [c.estimated_count for c in _analyse(img)] != [1]
+
+
+def test_a_ring_with_a_wide_hole_is_not_reported() -> None:
+    # the same with a hole of radius 24 px (36 %): a loop of ink, not a colony
+    img = _agar_with([(300.0, 300.0, 40.0)])
+    cv2.circle(img, (300, 300), 24, AGAR_BGR, -1, cv2.LINE_AA)
+    assert _analyse(img) == []
