@@ -13,9 +13,9 @@ circular Hough transform. Choices made here:
   ``min_diameter_mm``-``max_diameter_mm``; ``canny_high`` is Canny's upper threshold (grey
   levels of the 3x3 Sobel), ``perfectness`` the least score (``param2``). On the AGAR
   photographs F1 stayed within 0.835-0.846 over ``canny_high`` 20-45 and ``perfectness``
-  0.7-0.9 (at 6 px/mm), and within 0.839-0.843 at 4, 6 and 8 px/mm; ``canny_high`` 60-80
-  loses faint rings (F1 0.839, 0.834). 45 rather than 30 halves the time on noisy agar
-  (the generator's plates: 10 -> 5 ms per plate) and takes no agar texture for a ring there.
+  0.7-0.9 (at 6 px/mm), and within 0.839-0.843 at 4, 6 and 8 px/mm. ``canny_high`` 45 rather
+  than 30 halves the time on the generator's noisy agar and takes none of its texture for a
+  ring; 60 would save another ~3 ms but finds 32 rather than 37 colonies on plate 510.
 * **Inside the agar.** A circle must lie whole on the usable area, ``margin_mm`` (1 mm) inside
   its border: arcs of the meniscus and the wall also vote for circles.
 * **New, not found already.** A circle whose disc eq. 1's foreground covers by more than
@@ -29,13 +29,15 @@ circular Hough transform. Choices made here:
 The filled disc is added to the foreground, and the body then passes the same artefact and
 class tests as every other (ink, elongation, DES, waist).
 
-Measured with ``benchmarks/bench_real_plates.py`` (the pass alone, on the code before it):
-AGAR F1 0.827 -> 0.842 (precision 0.902 -> 0.904, recall 0.763 -> 0.788), median count error
-17.9 -> 16.7 %; plate 510 found 15 -> 37 of 69 boxed; phone-counts 3.1 -> 2.9 %. It costs
-about 5-9 ms per 1.3-Mpixel plate (``benchmarks/bench_plate.py``). The centre is the Hough
-circle's, within one accumulator cell (1.5 work pixels, ~0.4 mm). Not found: rings under
-2 mm, rings cut by another body, and the large soft-edged colonies of plates 12031 and 11924
-(their edge spreads over a millimetre or more: no Canny edge).
+Measured with ``benchmarks/bench_real_plates.py``, the pass on against off (``find_rings``):
+AGAR 1577 -> 1621 colonies reported, 1446 -> 1488 matched (F1 0.835 -> 0.849); plate 510
+found 16 -> 37 of 69 boxed, 11924 19 -> 24, 12031 22 -> 26; over-counted more: 13895 19 -> 21
+(19 boxed), 14512 14 -> 18 (15). The median count error moved 10.0 -> 11.8 % (plates near the
+median went over their truth); phone-counts 2.9 % either way. It costs 7-10 ms per 1.3-Mpixel
+plate of the generator (``benchmarks/bench_plate.py``), most of it in ``cv2.HoughCircles``.
+The centre is the Hough circle's, within one accumulator cell (1.5 work pixels, ~0.4 mm).
+Not found: rings under 2 mm, rings cut by another body, and the large soft-edged colonies of
+plates 12031 and 11924 (their edge spreads over a millimetre or more: no Canny edge).
 """
 
 from __future__ import annotations
@@ -80,10 +82,11 @@ def ring_bodies(
     """
     out = foreground.copy()
     scale = min(_WORK_PX_PER_MM / px_per_mm, 1.0)
-    small = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)  # then resampled: a third of the work
+    small = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
     if min(small.shape[:2]) < 8:
         return out
-    grey = cv2.GaussianBlur(cv2.cvtColor(small, cv2.COLOR_BGR2GRAY), (0, 0), _SIGMA_PX)
+    grey = cv2.GaussianBlur(small, (0, 0), _SIGMA_PX)
     ppm = px_per_mm * scale
     circles = cv2.HoughCircles(
         grey,
