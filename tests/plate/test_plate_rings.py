@@ -95,6 +95,6 @@ def test_ring_colonies_of_the_generator_are_found() -> None:
             score = score_plate(truth, analyze_plate(img, PlateParams(find_rings=rings)).colonies)
             found[rings] += score.found
             false_positives[rings] += score.false_positives
-    # measured: 54 against 44 of 60, no false positive either way
+    # measured: 55 against 44 of 60, no false positive either way
     assert found[True] >= found[False] + 6
     assert false_positives[True] <= false_positives[False]
