@@ -27,10 +27,15 @@ def _reference_body(contour: np.ndarray, fg: np.ndarray, params: PlateParams) ->
     """Mask, distance transform and waist of one body in its own crop (None if a stroke)."""
     x, y, bw, bh = cv2.boundingRect(contour)
     shift = np.array([x - PAD, y - PAD], np.int32)
-    mask = np.zeros((bh + 2 * PAD, bw + 2 * PAD), np.uint8)
-    cv2.drawContours(mask, [contour - shift], -1, 1, -1)
-    mask &= fg[y - PAD : y + bh + PAD, x - PAD : x + bw + PAD] > 0
+    filled = np.zeros((bh + 2 * PAD, bw + 2 * PAD), np.uint8)
+    cv2.drawContours(filled, [contour - shift], -1, 1, -1)
+    mask = filled & (fg[y - PAD : y + bh + PAD, x - PAD : x + bw + PAD] > 0)
     mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, DISC5)
+    # holes under HOLE_SHARE of the filled contour are part of the body
+    n, holes = cv2.connectedComponents((filled > mask).astype(np.uint8), connectivity=4)
+    for label in range(1, n):
+        if np.count_nonzero(holes == label) < plate_bodies.HOLE_SHARE * filled.sum():
+            mask[holes == label] = 1
     dt = cv2.distanceTransform(mask, cv2.DIST_L2, 3)
     r_in = float(dt.max())
     area = float(np.count_nonzero(mask))
@@ -98,11 +103,29 @@ def _reference_mix_score(roi: np.ndarray, body: dict, params: PlateParams) -> fl
     return float(np.mean(np.einsum("ij,ij->i", resid, resid) > params.mix_residual**2))
 
 
+def _with_translucent_centres(img: np.ndarray, truth: object) -> np.ndarray:
+    """``img`` with an agar-coloured centre painted into every authentic colony: a radius of
+    0.25 of the colony's (a hole of ~6 %, filled by the analysis) or, every third, 0.6 (~36 %,
+    left open)."""
+    out = img.copy()
+    agar = tuple(int(v) for v in np.median(img[img.shape[0] // 2 - 40 : img.shape[0] // 2 + 40,
+                                               img.shape[1] // 2 - 40 : img.shape[1] // 2 + 40]
+                                           .reshape(-1, 3), axis=0))  # fmt: skip
+    authentic = [c for c in truth.colonies if c.kind == "authentic"]  # type: ignore[attr-defined]
+    for i, colony in enumerate(authentic):
+        radius = np.sqrt(colony.area_px / np.pi) * (0.6 if i % 3 == 2 else 0.25)
+        centre = tuple(round(v) for v in colony.center)
+        cv2.circle(out, centre, max(round(radius), 2), agar, -1)
+    return out
+
+
 @pytest.fixture(scope="module")
 def stages(plates: list) -> list[tuple]:
-    """For three plates: the ROI, contours, foreground, D_alpha test and measured bodies."""
+    """For three plates, and the first with translucent centres (holes): the ROI, contours,
+    foreground, D_alpha test and measured bodies."""
     out = []
-    for img, _ in plates[:3]:
+    images = [img for img, _ in plates[:3]] + [_with_translucent_centres(*plates[0])]
+    for img in images:
         # bodies at the usable border dropped: the crops then fit without the analysis' margin
         _, copy, params, (x0, y0), usable, _ = plate_module.prepare_plate(
             img, PlateParams(drop_at_border=True)
