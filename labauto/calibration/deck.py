@@ -110,9 +110,10 @@ def _frame_source(config: Config, robot) -> Callable[[], np.ndarray]:
     frames = iter(camera)  # one pass: each capture is the next frame, not the first again
 
     def capture() -> np.ndarray:
-        for _name, image in frames:
-            return image
-        raise CalibrationError(f"camera {config.camera.driver!r} gave no more images")
+        frame = next(frames, None)
+        if frame is None:
+            raise CalibrationError(f"camera {config.camera.driver!r} gave no more images")
+        return frame[1]
 
     return capture
 

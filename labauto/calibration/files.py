@@ -17,7 +17,7 @@ from labauto.errors import LabautoError
 
 
 class CalibrationFileError(LabautoError):
-    """A calibration file cannot be written or read."""
+    """A calibration file cannot be written."""
 
 
 def write_opencv_yaml(path: str | Path, document: dict) -> Path:

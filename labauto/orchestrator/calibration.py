@@ -118,9 +118,7 @@ def _apply(homography: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 
 #: What to do about a stored deck calibration that a run refuses.
-_REDO_DECK = (
-    "calibrate the deck again (labauto calibrate deck) or set calibration.use_stored: false"
-)
+REDO_DECK = "calibrate the deck again (labauto calibrate deck) or set calibration.use_stored: false"
 
 
 def stored_deck_calibration(config: Any, store: CalibrationStore) -> DeckCalibration | None:
@@ -148,12 +146,12 @@ def stored_deck_calibration(config: Any, store: CalibrationStore) -> DeckCalibra
         problem = f"no {exc}" if isinstance(exc, KeyError) else str(exc)
         raise CalibrationError(
             f"stored deck calibration {name!r} (id {stored.id}) cannot be read ({problem}): "
-            + _REDO_DECK
+            + REDO_DECK
         ) from None
     limit = config.calibration.max_residual_mm
     if deck.residual_mm > limit:
         raise CalibrationError(
             f"stored deck calibration {name!r} (id {stored.id}) has a residual of "
-            f"{deck.residual_mm:.3f} mm, over the limit of {limit:.3f} mm: " + _REDO_DECK
+            f"{deck.residual_mm:.3f} mm, over the limit of {limit:.3f} mm: " + REDO_DECK
         )
     return deck

@@ -45,7 +45,7 @@ from labauto.config import Config, plate_params
 from labauto.devices import Analyzer, Camera, Robot
 from labauto.drivers.errors import DeviceError, DeviceRefused
 from labauto.errors import RunError
-from labauto.orchestrator.calibration import Calibration, stored_deck_calibration
+from labauto.orchestrator.calibration import REDO_DECK, Calibration, stored_deck_calibration
 from labauto.orchestrator.control import EmergencyStop, RunControl, StopRequested
 from labauto.orchestrator.head_check import HeadCheck, HeadMiss, head_check_for
 from labauto.orchestrator.planning import PickRules, plan_picks
@@ -356,6 +356,7 @@ class ColonyPickingRun:
     def _process_plate(
         self, position: int, plate_name: str, image: np.ndarray, calibration: Calibration
     ) -> None:
+        _check_image_size(plate_name, image, calibration)  # before the analysis, not after
         application = self.plugins.registry.get("applications", "plate")
         result = application(image, self.plate_params)
         stored = self.store.image_at(self.run_id, position)
@@ -372,7 +373,6 @@ class ColonyPickingRun:
             )
             id_of = {c.colony_index: c.id for c in self.store.colonies(self.run_id, stored.id)}
         else:
-            _check_image_size(plate_name, image, calibration)
             id_of = self._store_plate(position, plate_name, image, result, calibration)
         self._write_outputs(plate_name, image, result, id_of)
         on_this_plate = set(id_of.values())
@@ -611,8 +611,7 @@ def _check_image_size(plate_name: str, image: np.ndarray, calibration: Any) -> N
     if size is not None and (width, height) != tuple(size):
         raise RunError(
             f"{plate_name}: {width}x{height} pixels, but the stored deck calibration is for "
-            f"{size[0]}x{size[1]} images; calibrate the deck with this camera mode "
-            "(labauto calibrate deck) or set calibration.use_stored: false"
+            f"{size[0]}x{size[1]} images: " + REDO_DECK + " (with the camera in this mode)"
         )
 
 

@@ -1,7 +1,9 @@
 """Stored calibrations: save, find the one in force, list (table ``calibrations``).
 
 Part of :class:`~labauto.store.Store` (see :mod:`labauto.store.repository` for the rules every
-method follows). Several rows may share a name; the newest (highest id) is the one in force.
+method follows, with two exceptions: ``save_calibration`` returns the stored calibration, not
+only its id, and :class:`StoredCalibration` holds numpy matrices and has no ``to_dict()``).
+Several rows may share a name; the newest (highest id) is the one in force.
 """
 
 from __future__ import annotations

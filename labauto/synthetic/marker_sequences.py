@@ -31,7 +31,7 @@ from labauto.synthetic.grey_look import GreyLook
 from labauto.synthetic.markers import PlaneToImage, camera_map, draw_marker
 from labauto.vision.marker_codes import QUIET_RADIUS, RING_OUTER
 
-__all__ = ["SequenceFrame", "SequenceSpec", "board_points", "render_sequence"]
+__all__ = ["SequenceFrame", "SequenceSpec", "board_points", "mean_motion", "render_sequence"]
 
 
 @dataclass(frozen=True)
@@ -113,7 +113,7 @@ def _occluder(spec: SequenceSpec, t: float) -> tuple[int, int, int, int]:
     return (x0, 0, x0 + 90, spec.height)
 
 
-def _mean_motion(
+def mean_motion(
     spec: SequenceSpec, points: dict[int, tuple[float, float, float]], t: float
 ) -> np.ndarray:
     """Mean image displacement of the markers during the exposure around frame ``t``."""
@@ -184,7 +184,7 @@ def render_sequence(
             else:
                 painter(image, mid, (x, y), spec.radius_mm, to_image, look.ink)
         if spec.motion_blur:
-            image = _motion_blur(image, _mean_motion(spec, points, index))
+            image = _motion_blur(image, mean_motion(spec, points, index))
         if spec.light:
             phase = 2 * np.pi * index / spec.period_frames
             gain = 0.85 + 0.15 * np.sin(phase) + 0.1 * np.cos(phase) * (xx / spec.width - 0.5)

@@ -30,7 +30,7 @@ from labauto.vision.boards import Board, CodedBoard, GridBoard
 from labauto.vision.concentric import projected_center
 from labauto.vision.detector import DetectorParams, detect
 from labauto.vision.ellipse import Ellipse
-from labauto.vision.image import as_image
+from labauto.vision.image import as_grey
 from labauto.vision.markers import detect_markers
 
 
@@ -73,8 +73,7 @@ def _empty(found: int, reason: str, foreign: int = 0) -> BoardView:
 
 def find_board_points(image: np.ndarray, board: Board) -> BoardView:
     """Find ``board``'s points in ``image`` (see the module docstring)."""
-    img = as_image(image)
-    grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
+    grey = as_grey(image)
     if isinstance(board, CodedBoard):
         return _coded(grey, board)
     centres = _grid_centres(grey, board)
@@ -126,7 +125,8 @@ def ring_centres(ellipses: list[Ellipse], ratio: float) -> np.ndarray:
     """(N, 2) centres of the rings among ``ellipses``: each inner edge paired with the nearest
     larger ellipse about the same centre whose size is ``ratio`` (inner over outer diameter,
     within 0.15) times its own; the centre is the two concentric conics' projected centre.
-    A near ellipse of another size (a second contour of the same edge) is passed over."""
+    A near ellipse of another size (a second contour of the same edge) is passed over, and so
+    is one of the right size whose pair gives no projected centre."""
     ellipses = sorted(ellipses, key=lambda e: e.axes[0])
     centres, used = [], set()
     xy = np.array([e.center for e in ellipses]).reshape(-1, 2)
@@ -172,8 +172,7 @@ def order_grid(centres: np.ndarray, board: GridBoard) -> np.ndarray | None:
 
 def opencv_circle_grid(image: np.ndarray, board: GridBoard) -> np.ndarray | None:
     """The baseline: ``cv2.findCirclesGrid`` on the image (None when it finds no grid)."""
-    img = as_image(image)
-    grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
+    grey = as_grey(image)
     if board.polarity == "light-on-dark":
         grey = 255 - grey
     flags = cv2.CALIB_CB_ASYMMETRIC_GRID if board.asymmetric else cv2.CALIB_CB_SYMMETRIC_GRID

@@ -244,8 +244,7 @@ def _need(
 ) -> None:
     if len(usable) >= min_views:
         return
-    ok = set(usable)
-    why = Counter(reasons.get(i, "unknown") for i in range(len(views)) if i not in ok)
+    why = Counter(reasons.values())  # every view not usable has its reason
     detail = "; ".join(f"{n} x {r}" for r, n in why.most_common(3))
     if not views:
         detail = "no views given"

@@ -117,3 +117,9 @@ def _uint8_samples(image: np.ndarray, significant_bits: int | None, name: str) -
     else:
         scale = 255.0 / (2**significant_bits - 1)
     return np.clip(np.rint(image * scale), 0, 255).astype(np.uint8)
+
+
+def as_grey(image: object, *, min_side: int = 3) -> np.ndarray:
+    """:func:`as_image` as a ``uint8`` HxW grey image (BGR converted by ``cv2.cvtColor``)."""
+    img = as_image(image, min_side=min_side)
+    return cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img

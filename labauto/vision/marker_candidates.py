@@ -17,11 +17,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from labauto.vision.detector import extract_contours
-from labauto.vision.image import as_image
+from labauto.vision.image import as_grey
 from labauto.vision.marker_codes import QUIET_RADIUS
 from labauto.vision.markers import Marker, MarkerParams, find_markers
 from labauto.vision.roi_mosaic import build_mosaic, clip_rect, merge_overlapping
@@ -58,8 +57,7 @@ def grey_image(image: np.ndarray) -> np.ndarray:
     """The uint8 grey image the marker detector works on: read by the rules of
     :func:`labauto.vision.image.as_image`, as :func:`~labauto.vision.markers.detect_markers`
     reads it (so a float 0-1 or a BGRA frame gives the same markers), BGR converted."""
-    img = as_image(image, min_side=1)
-    return cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
+    return as_grey(image, min_side=1)
 
 
 def centre_candidates(grey: np.ndarray, params: MarkerParams | None = None) -> CentreCandidates:

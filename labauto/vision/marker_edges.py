@@ -242,12 +242,18 @@ class _Rays:
         )
 
 
+def ring_rows(circles: np.ndarray) -> np.ndarray:
+    """(K, 5) the ring edge each marker's centre is projected with, from (K, 3, 5) circle rows:
+    the outer edge, or the inner one where the outer fit failed (NaN where both did)."""
+    return np.where(np.isfinite(circles[:, 2, :1]), circles[:, 2], circles[:, 1])
+
+
 def centres_of(circles: np.ndarray) -> np.ndarray:
     """(K, 2) projected centres of (K, 3, 5) circle rows, NaN where there is none: the centre
-    circle with the outer ring edge (radius ratio 3, the best-conditioned pair), or with the
-    inner edge when the outer one failed (:func:`labauto.vision.concentric.projected_centers`).
+    circle with the ring edge of :func:`ring_rows` (the outer one, radius ratio 3, is the
+    best-conditioned pair; :func:`labauto.vision.concentric.projected_centers`).
     """
-    ring = np.where(np.isfinite(circles[:, 2, :1]), circles[:, 2], circles[:, 1])
+    ring = ring_rows(circles)
     out = np.full((len(circles), 2), np.nan)
     have = np.isfinite(circles[:, 0, 0]) & np.isfinite(ring[:, 0])
     if have.any():

@@ -64,10 +64,10 @@ from labauto.vision.contours import Contours
 from labauto.vision.detector import DetectorParams, extract_contours, validate_params
 from labauto.vision.ellipse import Ellipse
 from labauto.vision.ellipse_fit import fit_ellipses_algebraic_batch, fit_selected_ellipses
-from labauto.vision.image import as_image
+from labauto.vision.image import as_grey
 from labauto.vision.marker_codes import N_BITS, RING_OUTER, decode_words
 from labauto.vision.marker_codes import warm as warm_codes
-from labauto.vision.marker_edges import affine_frames, refine_circles
+from labauto.vision.marker_edges import affine_frames, refine_circles, ring_rows
 from labauto.vision.shape_angle import shape_angles
 
 #: Samples per sector along the ring, and the ring radii sampled (centre radii).
@@ -246,8 +246,7 @@ def find_markers(image: np.ndarray, params: MarkerParams = MarkerParams()) -> Ma
     """:func:`detect_markers` with its parameters as one value, and the timing."""
     warm_codes()  # the one-off code table is not part of an image's time
     start = time.perf_counter()
-    img = as_image(image)
-    grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
+    grey = as_grey(image)
     contours = extract_contours(grey, params.detector_params())
     markers = _markers(grey, contours, params) if len(contours) else []
     elapsed = (time.perf_counter() - start) * 1e3
@@ -397,12 +396,6 @@ def _best_reads(ids: np.ndarray, score: np.ndarray) -> list[tuple[int, int]]:
     return sorted(best.items())
 
 
-def _ellipse(row: list[float]) -> Ellipse:
-    """The ellipse of a row ``[cx, cy, a, b, angle_deg]``."""
-    cx, cy, a, b, angle = row
-    return Ellipse((cx, cy), (a, b), angle)
-
-
 def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list[Marker]:
     centroids, index, rows = _candidates(grey, contours, params)
     if not len(index):
@@ -440,10 +433,8 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
     bias = np.hypot(*(centres - ellipses[:, :2]).T)
     corrected = np.isfinite(bias) & (bias <= MAX_BIAS_SHARE * ellipses[:, 3] + MAX_BIAS_PX)
     centres = np.where(corrected[:, None], centres, ellipses[:, :2])
-    # the ring fit the centre came from (:func:`~labauto.vision.marker_edges.centres_of`): the
-    # outer edge, or the inner one where it stood in for a failed outer one (finite wherever
-    # the centre was corrected)
-    rings = np.where(np.isfinite(circles[:, 2, :1]), circles[:, 2], circles[:, 1])
+    # the ring fit the centre came from (finite wherever the centre was corrected)
+    rings = ring_rows(circles)
     # plain Python values from here on (numpy scalars are slow one at a time)
     columns = zip(
         [chosen[j][0] for j in keep.tolist()],
@@ -461,11 +452,11 @@ def _markers(grey: np.ndarray, contours: Contours, params: MarkerParams) -> list
             id=marker_id,
             center=(x, y),
             centroid=(cx, cy),
-            ellipse=_ellipse(e),
+            ellipse=Ellipse.normalised(*e),
             score=read_score,
             rotation_deg=rotation,
             bias_corrected=ok,
-            ring_ellipses=(_ellipse(ring),) if ok else (),
+            ring_ellipses=(Ellipse.normalised(*ring),) if ok else (),
         )
         for marker_id, (x, y), (cx, cy), e, read_score, rotation, ok, ring in columns
     ]

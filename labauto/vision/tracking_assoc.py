@@ -137,8 +137,7 @@ class Association:
                 near = box[unclear] <= half[unclear, None]
                 to_read.update(np.flatnonzero(near.any(axis=0)).tolist())
         quiet = ~_near_any(positions, list(found.values()))  # not in a found marker's ring
-        if len(tracks):
-            to_read.update(np.flatnonzero(eligible[missed > 0].any(axis=0) & quiet).tolist())
+        to_read.update(np.flatnonzero(eligible[missed > 0].any(axis=0) & quiet).tolist())
         if full:
             to_read.update(np.flatnonzero((claimed == 0) & whole & quiet).tolist())
         return [candidates[k] for k in sorted(to_read)]

@@ -12,6 +12,7 @@ import yaml
 
 from labauto.calibration.boards_io import BoardFileError, read_board
 from labauto.cli.main import main
+from labauto.vision import board_points
 from labauto.vision.board_points import ring_centres
 from labauto.vision.boards import BoardError, board_from_dict
 from labauto.vision.ellipse import Ellipse
@@ -133,11 +134,19 @@ def test_missing_board_file_is_named(tmp_path) -> None:
         read_board(tmp_path / "nosuch.yaml")
 
 
-def test_rings_pair_past_a_second_contour_of_the_inner_edge():
+def test_rings_pair_past_a_second_contour_of_the_inner_edge(monkeypatch) -> None:
     inner = Ellipse((100.0, 80.0), (10.0, 9.0), 20.0)
     duplicate = Ellipse((100.1, 80.0), (10.6, 9.5), 20.0)  # the same edge traced twice
+    # of the right size, but the pair gives no centre: pairing must go on to the next one
+    no_centre = Ellipse((100.4, 80.0), (19.5, 17.6), 20.0)
     outer = Ellipse((100.0, 80.0), (20.0, 18.0), 20.0)
     lone = Ellipse((300.0, 80.0), (10.0, 9.0), 0.0)  # no ring round it
-    centres = ring_centres([outer, duplicate, lone, inner], ratio=0.5)
+    real = board_points.projected_center
+    monkeypatch.setattr(
+        board_points,
+        "projected_center",
+        lambda pair: None if no_centre in pair else real(pair),
+    )
+    centres = ring_centres([outer, no_centre, duplicate, lone, inner], ratio=0.5)
     assert centres.shape == (1, 2)
     np.testing.assert_allclose(centres[0], (100.0, 80.0), atol=1e-6)
