@@ -7,7 +7,9 @@ Two sets, scored as ``realplates/README.md`` says:
   (2 px tolerance) or whose box holds its centroid, nearest first (one greedy pass over all
   body-box pairs of a plate, nearest first). Precision = matched / reported colonies, recall =
   matched / truth colonies, F1 from both, summed over all plates. ``1399.jpg`` has no labels
-  and is left out.
+  and is left out. Picking: of the colonies classed ``authentic`` (the ones offered for
+  picking), how many hold the centres of two or more truth boxes inside their contour (a pick
+  would take a mix) and how many hold none (not a boxed colony).
 * ``phone-counts``: phone photographs counted by hand; the count error of a plate is
   ``|colonies_estimate - truth| / truth``.
 
@@ -43,6 +45,9 @@ class BoxScore:
     reported: int
     truth: int
     matched: int
+    offered: int = 0  # colonies classed authentic
+    offered_multi: int = 0  # of them, holding two or more truth centres
+    offered_empty: int = 0  # of them, holding none
 
 
 def read_boxes(label_file: Path, width: int, height: int) -> np.ndarray:
@@ -87,7 +92,23 @@ def score_boxes(result: PlateResult, boxes: np.ndarray, tolerance_px: float = 2.
             capacity[b] -= 1
             taken[t] = True
             matched += 1
-    return BoxScore(result.counts["colonies_estimate"], len(boxes), matched)
+    offered = [c for c in result.colonies if c.klass == "authentic"]
+    held = [
+        sum(
+            cv2.pointPolygonTest(np.asarray(c.contour, np.float32).reshape(-1, 1, 2), pt, False)
+            >= 0
+            for pt in map(tuple, centres.astype(float))
+        )
+        for c in offered
+    ]
+    return BoxScore(
+        result.counts["colonies_estimate"],
+        len(boxes),
+        matched,
+        len(offered),
+        sum(n >= 2 for n in held),
+        sum(n == 0 for n in held),
+    )
 
 
 def _f1(p: float, r: float) -> float:
@@ -110,10 +131,10 @@ def run_agar_boxes(folder: Path, only: set[str], params: PlateParams | None) -> 
     """Score the agar-boxes set; print one row per plate and the totals."""
     print(f"agar-boxes ({folder})")
     header = f"{'plate':>8s} {'size':>10s} {'truth':>6s} {'found':>6s} {'matched':>8s} "
-    header += f"{'P':>5s} {'R':>5s} {'count err':>9s} {'ms':>7s}"
+    header += f"{'P':>5s} {'R':>5s} {'count err':>9s} {'picks':>5s} {'2+':>3s} {'ms':>7s}"
     print(header)
     print("-" * len(header))
-    totals = [0, 0, 0]
+    totals = [0, 0, 0, 0, 0, 0]
     errors, times = [], []
     for image_path in sorted((folder / "images").glob("*.jpg"), key=lambda p: int(p.stem)):
         label = folder / "labels" / f"{image_path.stem}.txt"
@@ -126,16 +147,17 @@ def run_agar_boxes(folder: Path, only: set[str], params: PlateParams | None) -> 
         err = abs(score.reported - score.truth) / score.truth
         errors.append(err)
         times.append(ms)
-        for i, v in enumerate((score.reported, score.truth, score.matched)):
+        row = (score.reported, score.truth, score.matched)
+        for i, v in enumerate((*row, score.offered, score.offered_multi, score.offered_empty)):
             totals[i] += v
         p = score.matched / score.reported if score.reported else 0.0
         r = score.matched / score.truth
         print(
             f"{image_path.stem:>8s} {w:>4d}x{h:<5d} {score.truth:6d} {score.reported:6d} "
-            f"{score.matched:8d} {p:5.2f} {r:5.2f} {100 * err:8.1f}% {ms:7.0f}"
-            + (f"  ({why})" if why else "")
+            f"{score.matched:8d} {p:5.2f} {r:5.2f} {100 * err:8.1f}% {score.offered:5d} "
+            f"{score.offered_multi:3d} {ms:7.0f}" + (f"  ({why})" if why else "")
         )
-    reported, truth, matched = totals
+    reported, truth, matched, offered, multi, empty = totals
     p = matched / reported if reported else 0.0
     r = matched / truth if truth else 0.0
     summary = {"precision": p, "recall": r, "f1": _f1(p, r), **_count_summary(errors, times)}
@@ -143,6 +165,10 @@ def run_agar_boxes(folder: Path, only: set[str], params: PlateParams | None) -> 
         f"total: {summary['plates']} plates, {truth} colonies, {reported} reported, {matched} "
         f"matched: precision {p:.3f}, recall {r:.3f}, F1 {summary['f1']:.3f}; "
         + _count_line(summary)
+    )
+    print(
+        f"picking: {offered} colonies offered (authentic), {multi} holding two or more boxed "
+        f"colonies, {empty} holding none"
     )
     return summary
 

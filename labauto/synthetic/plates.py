@@ -7,12 +7,12 @@ picker's camera sees it, and returns it with the ground truth of everything draw
   the wall) on a dark or light stage;
 * the agar: one of several colours (:data:`AGAR_COLOURS_RGB`), a lighting gradient with
   vignetting, a low-frequency grain and sensor noise, and a slight camera blur;
-* authentic colonies: deformed elliptic shapes (DES), axis ratio 1:1 to 1:1.15 before a low-order
+* authentic colonies: deformed elliptic shapes (DES), axis ratio 1:1 to 1:1.08 before a low-order
   harmonic deformation (orders 2 to 4) of the boundary (second-moment axis ratios of the
-  outlines up to ~1.3, as single colonies on the AGAR photographs: 1.01-1.21 from the 5th to the
-  95th percentile), a soft edge, dome shading with a small
-  off-centre highlight, colours from a palette and, now and then, a colony of nearly the agar's
-  colour that still has a clear contrast;
+  outlines as analysed 1.02-1.14 from the 5th to the 95th percentile, at most ~1.19, as single
+  colonies classed authentic on the AGAR photographs: 1.006-1.168), a soft edge, dome
+  shading with a small off-centre highlight, colours from a palette and, now and then, a
+  colony of nearly the agar's colour that still has a clear contrast;
 * merged colonies: pairs and triples of overlapping colonies with a pronounced waist;
 * mixed colonies: a DES whose body holds a second species of another colour, as a sector or as
   speckles;
@@ -311,7 +311,7 @@ class _Des:
 
 
 def _random_des(rng: np.random.Generator, cx: float, cy: float, a: float) -> _Des:
-    ratio = rng.uniform(1.0, 1.15)
+    ratio = rng.uniform(1.0, 1.08)
     coeffs = tuple(
         (k, float(rng.uniform(0.0, amp)), float(rng.uniform(0.0, 2.0 * np.pi)))
         for k, amp in ((2, 0.05), (3, 0.04), (4, 0.025))

@@ -49,7 +49,7 @@ Pipeline and the choices it makes where the paper leaves room:
    is below ``max_concavity`` times the inscribed radius. D_alpha alone does not separate a
    merged pair of unequal colonies (they read 14-46 degrees, single colonies 2-21), the waist
    does (measured: singles <= 0.12, merged >= 0.22). Real colonies are round, so an authentic
-   colony's axis ratio is at most ``max_authentic_elongation`` (1.3), and its distance transform
+   colony's axis ratio is at most ``max_authentic_elongation`` (1.2), and its distance transform
    has one peak (step 5 counts every body): two colonies that meet in a shallow waist pass the
    DES tests, and picking one would take a mix of two. Merged: every other object. Mixed: a DES
    whose colours do not follow one species' dome. Its pixels at least ``edge_skip_px`` inside
