@@ -66,11 +66,13 @@ Pipeline and the choices it makes where the paper leaves room:
    shape cannot be read as a DES (small colonies of a few pixels, irregular edges on real
    plates). It stays in the class ``merged`` (never offered for picking) with
    ``estimated_count`` 1; forcing 2 here over-counted small colonies on real plates by up to a
-   third. A one-peak body longer than ``pair_elongation`` (1.3) and at least as large as the
-   plate's median authentic colony counts two (two colonies overlapping too deeply for a waist):
-   on the AGAR photographs F1 0.817 -> 0.827 and median count error 20.0 -> 17.9 %, on the phone
-   photos (not used to choose it) 5.5 -> 3.1 %. Compact clumps of three whose members overlap
-   deeply are the usual miss (counted 2).
+   third. A peak lower than ``peak_floor_ratio`` (0.3) times the median inscribed radius of
+   the plate's DES bodies is no colony's centre (thin crescents of a large colony). A one-peak
+   body longer than ``pair_elongation`` (1.3) and at least as large as the plate's median
+   authentic colony counts two (two colonies overlapping too deeply for a waist): on the AGAR
+   photographs F1 0.817 -> 0.827 and median count error 20.0 -> 17.9 %, on the phone photos
+   (not used to choose it) 5.5 -> 3.1 %. Compact clumps of three whose members overlap deeply
+   are the usual miss (counted 2).
 
 Coordinates: pixels, origin at the centre of the top-left pixel, x right, y down.
 """
@@ -97,6 +99,7 @@ from labauto.vision.plate_background import (
     with_radial_rim,
 )
 from labauto.vision.plate_bodies import (
+    MIN_SINGLES,
     PAD,
     measure_bodies,
     merged_counts,
@@ -420,7 +423,10 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     stage_done("measures")
     # every body is counted: a DES holding two peaks apart (two colonies that meet in a shallow
     # waist) is merged, never offered for picking
-    counts = merged_counts(bodies, ~bodies.stroke, params.valley_ratio)
+    least_peak = 0.0
+    if des.sum() >= MIN_SINGLES:  # a peak far thinner than the plate's colonies is no centre
+        least_peak = params.peak_floor_ratio * float(np.median(bodies.r_in[des]))
+    counts = merged_counts(bodies, ~bodies.stroke, params.valley_ratio, least_peak)
     des &= counts == 1
     counts = pair_counts(bodies, counts, des, params.pair_elongation)
     mix = mix_scores(roi, bodies, des, params)

@@ -263,16 +263,19 @@ def mix_scores(
     return score
 
 
-def merged_counts(bodies: Bodies, which: np.ndarray, valley_ratio: float) -> np.ndarray:
+def merged_counts(
+    bodies: Bodies, which: np.ndarray, valley_ratio: float, least_peak: float = 0.0
+) -> np.ndarray:
     """Colonies in each merged body (where ``which`` is true; 1 elsewhere), all at once.
 
     Step 5: one peak per plateau of the distance transform's local maxima (5x5), above
-    ``max(2, 0.3 r_in)``, at its highest pixel (the first in raster order on a tie); peaks are
-    taken greedily from the highest (plateaus of equal height in the order OpenCV labels a
-    crop: by their first 2x2 block in raster order), and a peak is kept when the straight
-    segment to every peak kept before it dips below ``valley_ratio`` times the lower of the
-    two. At least ``MIN_MERGED_COUNT`` (1). The segments between all pairs of peaks of a body
-    are sampled at once.
+    ``max(2, least_peak, 0.3 r_in)``, at its highest pixel (the first in raster order on a
+    tie); peaks are taken greedily from the highest (plateaus of equal height in the order
+    OpenCV labels a crop: by their first 2x2 block in raster order), and a peak is kept when
+    the straight segment to every peak kept before it dips below ``valley_ratio`` times the
+    lower of the two. At least ``MIN_MERGED_COUNT`` (1). The segments between all pairs of
+    peaks of a body are sampled at once. ``least_peak`` (px) is the plate's yardstick for a
+    colony's centre (:attr:`PlateParams.peak_floor_ratio`); 0 leaves it out.
     """
     counts = np.ones(len(bodies.index), np.intp)
     if not which.any():
@@ -284,7 +287,7 @@ def merged_counts(bodies: Bodies, which: np.ndarray, valley_ratio: float) -> np.
     dt, row_body = bodies.dt[rows], bodies.row_body[rows]
     first_row = np.zeros(len(slot), np.intp)
     first_row[which] = np.cumsum(slot[which]) - slot[which]
-    floor = np.maximum(2.0, 0.3 * bodies.r_in)
+    floor = np.maximum(max(2.0, least_peak), 0.3 * bodies.r_in)
     floor_of_row = np.where(row_body >= 0, floor[np.maximum(row_body, 0)], np.inf)
     cand = (dt >= cv2.dilate(dt, _DISC5)) & (dt >= floor_of_row[:, None])
     n, labels = cv2.connectedComponents(cand.view(np.uint8), connectivity=8)

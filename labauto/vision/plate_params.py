@@ -100,6 +100,14 @@ class PlateParams:
     valley_ratio : float
         Distance-transform dip between two peaks, relative to the lower peak, that separates two
         colonies of a merged body.
+    peak_floor_ratio : float
+        A distance-transform peak of a merged body is a colony's centre only when it is at
+        least this fraction of the plate's median single colony's inscribed radius (the DES
+        bodies, of 3 or more); 0 turns it off. Thin pieces of a large colony (crescents that
+        the rim's background cut from it) otherwise counted two or three each. Measured on
+        the AGAR photographs: 0.3 drops 28 reported colonies and 1 matched one (F1 0.846 ->
+        0.852; plate 4904 48 -> 36 of 22), 0.2 drops 17 (F1 0.849), 0.5 drops 61 and 7
+        matched (F1 0.857, but median count error 11.8 -> 13.3 %); phone-counts unchanged.
     pair_elongation : float
         A merged body of one peak whose axis ratio is at least this and whose area is at least
         the plate's median single colony's (authentic or mixed, of 3 or more) counts as two
@@ -160,6 +168,7 @@ class PlateParams:
     mix_residual: float = 24.0
     mix_fraction: float = 0.06
     valley_ratio: float = 0.9
+    peak_floor_ratio: float = 0.3
     pair_elongation: float = 1.3
     reject_ink: bool = True
     drop_at_border: bool = False
@@ -188,6 +197,7 @@ class PlateParams:
             "rim_band_mm",
             "faint_factor",
             "pair_elongation",
+            "peak_floor_ratio",
         )
         for name in non_negative:
             value = getattr(self, name)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 import pytest
@@ -65,6 +67,22 @@ def test_a_long_one_peak_body_as_large_as_the_plates_colonies_counts_two() -> No
     assert (by_place[(25, 15)].klass, by_place[(25, 15)].estimated_count) == ("merged", 1)
     off = _analyse_with(_agar_with(singles + pair + small), pair_elongation=0.0)
     assert sum(c.estimated_count for c in off) == sum(c.estimated_count for c in colonies) - 1
+
+
+def test_a_thin_crescent_beside_large_colonies_counts_one() -> None:
+    # a beaded arc 12-15 px wide (a piece of a large colony that the rim's background cut
+    # away, as on AGAR plate 4904) beside colonies of radius 40 px: its bumps are peaks of the
+    # distance transform and the straight segments between them leave the curved body, so
+    # without the plate's yardstick every bump counted as a colony
+    singles = [(120, 150, 40), (120, 450, 40), (480, 450, 40)]
+    arc = [
+        (400 + 30 * math.cos(math.radians(a)), 250 + 30 * math.sin(math.radians(a)), 7.5 - i % 2)
+        for i, a in enumerate(range(0, 100, 25))
+    ]
+    img = _agar_with(singles + arc)
+    counts = [c.estimated_count for c in _analyse(img)]
+    assert counts == [1, 1, 1, 1]
+    assert sorted(c.estimated_count for c in _analyse_with(img, peak_floor_ratio=0.0))[-1] >= 3
 
 
 def test_a_colony_with_a_translucent_centre_is_one_colony(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -55,11 +55,11 @@ def _reference_body(contour: np.ndarray, fg: np.ndarray, params: PlateParams) ->
     }
 
 
-def _reference_merged_count(dt: np.ndarray, valley_ratio: float) -> int:
+def _reference_merged_count(dt: np.ndarray, valley_ratio: float, least_peak: float = 0.0) -> int:
     """Step 5 on one body's crop, peak after peak."""
     peak_max = float(dt.max())
     dil = cv2.dilate(dt, DISC5)
-    cand = ((dt >= dil) & (dt >= max(2.0, 0.3 * peak_max))).astype(np.uint8)
+    cand = ((dt >= dil) & (dt >= max(2.0, least_peak, 0.3 * peak_max))).astype(np.uint8)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(cand, connectivity=8)
     peaks = []
     for i in range(1, n):
@@ -159,18 +159,25 @@ def test_canvas_measures_equal_per_crop_measures(stages: list) -> None:
                 assert bodies.concavity[b] == math.inf  # not needed: never a DES
 
 
-def test_vectorised_mix_scores_and_merged_counts_equal_per_body(stages: list) -> None:
+@pytest.mark.parametrize("least_peak", [0.0, 6.0])
+def test_vectorised_mix_scores_and_merged_counts_equal_per_body(
+    stages: list, least_peak: float
+) -> None:
+    floored = 0  # bodies whose count the floor changed: the floor must be exercised
     for roi, contours, fg, _, bodies, params in stages:
         everyone = ~bodies.stroke
         scores = plate_bodies.mix_scores(roi, bodies, everyone, params)
-        counts = plate_bodies.merged_counts(bodies, everyone, params.valley_ratio)
+        counts = plate_bodies.merged_counts(bodies, everyone, params.valley_ratio, least_peak)
         for b, k in enumerate(bodies.index):
             if not everyone[b]:
                 assert scores[b] == 0.0 and counts[b] == 1
                 continue
             ref = _reference_body(contours[k], fg, params)
             assert scores[b] == pytest.approx(_reference_mix_score(roi, ref, params), abs=1e-12)
-            assert counts[b] == _reference_merged_count(ref["dt"], params.valley_ratio)
+            expected = _reference_merged_count(ref["dt"], params.valley_ratio, least_peak)
+            assert counts[b] == expected
+            floored += expected != _reference_merged_count(ref["dt"], params.valley_ratio)
+    assert (floored > 0) == (least_peak > 0)
 
 
 def test_unit_weight_deviation_equals_the_weighted_formula(plates: list) -> None:
