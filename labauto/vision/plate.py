@@ -45,20 +45,20 @@ Pipeline and the choices it makes where the paper leaves room:
    contour restricted to the foreground (a loop of ink is not solid) and closed with a 5x5 disc;
    holes under a tenth of it are filled (translucent centres, ``plate_bodies.HOLE_SHARE``).
 4. **Classes.** Authentic: a DES, i.e. centroid inside and D_alpha (median by default) below
-   ``des_threshold_deg``, and no waist: the deepest concavity (distance from the convex hull)
-   is below ``max_concavity`` times the inscribed radius. D_alpha alone does not separate a
-   merged pair of unequal colonies (they read 14-46 degrees, single colonies 2-21), the waist
-   does (measured: singles <= 0.12, merged >= 0.22). Real colonies are round, so an authentic
-   colony's axis ratio is at most ``max_authentic_elongation`` (1.2), and its distance transform
-   has one peak (step 5 counts every body): two colonies that meet in a shallow waist pass the
-   DES tests, and picking one would take a mix of two. Merged: every other object. Mixed: a DES
-   whose colours do not follow one species' dome. Its pixels at least ``edge_skip_px`` inside
-   the boundary are fitted per channel by a quadratic in the normalised distance to the
-   boundary (the dome shading of one species); a pixel farther than ``mix_residual`` grey
-   levels (Euclidean, BGR) from the fit is an outlier, and the colony is mixed when the fraction
-   of outliers (``mix_score``) is at least ``mix_fraction``: a sector or speckles of a second
-   species of another colour or brightness. The rule is absolute, not relative to the plate's
-   other colonies, so a plate of only mixed colonies is still read right.
+   ``des_threshold_deg``, and no waist: the deepest concavity (distance from the convex hull) is
+   below ``max_concavity`` times the inscribed radius. D_alpha alone does not separate a merged
+   pair of unequal colonies (they read 14-46 degrees, single colonies 2-21), the waist does
+   (generator: singles <= 0.12, merged >= 0.22; ``max_concavity`` 0.2). Real colonies are round, so
+   an authentic colony's axis ratio is at most ``max_authentic_elongation`` (1.2), and its distance
+   transform has one peak (step 5 counts every body): two colonies that meet in a shallow waist
+   pass the DES tests, and picking one would take a mix of two. Merged: every other object. Mixed:
+   a DES whose colours do not follow one species' dome. Its pixels at least ``edge_skip_px`` inside
+   the boundary are fitted per channel by a quadratic in the normalised distance to the boundary
+   (the dome shading of one species); a pixel farther than ``mix_residual`` grey levels (Euclidean,
+   BGR) from the fit is an outlier, and the colony is mixed when the fraction of outliers
+   (``mix_score``) is at least ``mix_fraction``: a sector or speckles of a second species of
+   another colour or brightness. The rule is absolute, not relative to the plate's other colonies,
+   so a plate of only mixed colonies is still read right.
 5. **Merged count.** Peaks of the merged body's distance transform (one per plateau), kept
    greedily from the highest; a peak is a new colony when the distance transform along the
    straight segment to every peak already kept dips below ``valley_ratio`` times the lower peak
