@@ -13,12 +13,14 @@ Two sets, scored as ``realplates/README.md`` says:
 * ``phone-counts``: phone photographs counted by hand; the count error of a plate is
   ``|colonies_estimate - truth| / truth``.
 
-For both sets the table gives every plate and the totals: median count error over the plates
-and how many are over 15 %. The images are read by ``cv2.imread`` (EXIF orientation applied).
-Run: ``python benchmarks/bench_real_plates.py [--data DIR] [--set agar-boxes|phone-counts]
-[--only ID ...]``. The data are development data, not part of labauto; without them the script
-says where it looked and stops (exit status 2 when ``--data`` named the folder, 0 when the
-default place is simply absent, so ``make bench`` goes on).
+For both sets the table gives every plate and the totals: median count error over the plates and
+how many are over 15 %. The images are read by ``cv2.imread`` (EXIF orientation applied). Run:
+``python benchmarks/bench_real_plates.py [--data DIR] [--set agar-boxes|phone-counts] [--only ID
+...] [--camera-scale PX_PER_MM]``; ``--camera-scale`` first resamples every photo (area averaging,
+or bilinear up) so that its dish is at that scale, as a webcam would see it. The data are
+development data, not part of labauto; without them the script says where it looked and stops (exit
+status 2 when ``--data`` named the folder, 0 when the default place is simply absent, so ``make
+bench`` goes on).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from labauto.vision.dish import find_dish
 from labauto.vision.plate import PlateParams, PlateResult, analyze_plate
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "realplates"
@@ -115,8 +118,24 @@ def _f1(p: float, r: float) -> float:
     return 2 * p * r / (p + r) if p + r > 0 else 0.0
 
 
-def _analyze(path: Path, params: PlateParams | None) -> tuple[PlateResult | None, float, str]:
+def _read(path: Path, camera_scale: float | None) -> np.ndarray | None:
+    """The photo, resampled so that its dish is at ``camera_scale`` px/mm when one is given."""
     image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None or not camera_scale:
+        return image
+    try:
+        px_per_mm = 2.0 * find_dish(image).radius / PlateParams().dish_diameter_mm
+    except ValueError:
+        return image  # no dish: the analysis reports it
+    f = camera_scale / px_per_mm
+    return cv2.resize(
+        image, None, fx=f, fy=f, interpolation=cv2.INTER_AREA if f < 1 else cv2.INTER_LINEAR
+    )
+
+
+def _analyze(
+    image: np.ndarray | None, params: PlateParams | None
+) -> tuple[PlateResult | None, float, str]:
     if image is None:
         return None, 0.0, "unreadable"
     t0 = time.perf_counter()
@@ -127,7 +146,9 @@ def _analyze(path: Path, params: PlateParams | None) -> tuple[PlateResult | None
     return result, (time.perf_counter() - t0) * 1000, ""
 
 
-def run_agar_boxes(folder: Path, only: set[str], params: PlateParams | None) -> dict[str, float]:
+def run_agar_boxes(
+    folder: Path, only: set[str], params: PlateParams | None, camera_scale: float | None = None
+) -> dict[str, float]:
     """Score the agar-boxes set; print one row per plate and the totals."""
     print(f"agar-boxes ({folder})")
     header = f"{'plate':>8s} {'size':>10s} {'truth':>6s} {'found':>6s} {'matched':>8s} "
@@ -140,8 +161,9 @@ def run_agar_boxes(folder: Path, only: set[str], params: PlateParams | None) -> 
         label = folder / "labels" / f"{image_path.stem}.txt"
         if not label.exists() or (only and image_path.stem not in only):
             continue
-        result, ms, why = _analyze(image_path, params)
-        h, w = cv2.imread(str(image_path), cv2.IMREAD_COLOR).shape[:2]
+        image = _read(image_path, camera_scale)
+        result, ms, why = _analyze(image, params)
+        h, w = image.shape[:2]
         boxes = read_boxes(label, w, h)
         score = BoxScore(0, len(boxes), 0) if result is None else score_boxes(result, boxes)
         err = abs(score.reported - score.truth) / score.truth
@@ -189,7 +211,9 @@ def _count_line(summary: dict[str, float]) -> str:
     )
 
 
-def run_phone_counts(folder: Path, only: set[str], params: PlateParams | None) -> dict[str, float]:
+def run_phone_counts(
+    folder: Path, only: set[str], params: PlateParams | None, camera_scale: float | None = None
+) -> dict[str, float]:
     """Score the phone-counts set; print one row per plate and the totals."""
     print(f"phone-counts ({folder})")
     header = f"{'plate':>9s} {'size':>10s} {'truth':>6s} {'found':>6s} {'count err':>9s} {'ms':>7s}"
@@ -203,7 +227,7 @@ def run_phone_counts(folder: Path, only: set[str], params: PlateParams | None) -
         if only and stem not in only:
             continue
         truth = int(row["human_count_total_CFU"])
-        result, ms, why = _analyze(folder / "images" / row["image"], params)
+        result, ms, why = _analyze(_read(folder / "images" / row["image"], camera_scale), params)
         found = result.counts["colonies_estimate"] if result is not None else 0
         err = abs(found - truth) / truth
         errors.append(err)
@@ -226,6 +250,13 @@ def main() -> int:
     ap.add_argument("--data", type=Path, default=None, help=f"default: {DEFAULT_DATA}")
     ap.add_argument("--set", choices=("agar-boxes", "phone-counts"), action="append")
     ap.add_argument("--only", nargs="*", default=[], help="image stems to score")
+    ap.add_argument(
+        "--camera-scale",
+        type=float,
+        default=None,
+        metavar="PX_PER_MM",
+        help="resample every photo so that its dish is at this scale (a webcam: 4-8)",
+    )
     args = ap.parse_args()
     sets = args.set or ["agar-boxes", "phone-counts"]
     data = args.data or DEFAULT_DATA
@@ -241,9 +272,9 @@ def main() -> int:
     only = set(args.only)
     for name in sets:
         if name == "agar-boxes":
-            run_agar_boxes(args.data / name, only, None)
+            run_agar_boxes(args.data / name, only, None, args.camera_scale)
         else:
-            run_phone_counts(args.data / name, only, None)
+            run_phone_counts(args.data / name, only, None, args.camera_scale)
         print()
     return 0
 

@@ -45,6 +45,9 @@ class PlateParams:
         The image's scale from a camera calibration; None: from the dish.
     analysis_px_per_mm : float
         Finest scale analysed; finer images are resampled down to it (0: never resample).
+    min_analysis_px_per_mm : float
+        Images coarser than this are resampled up to ``analysis_px_per_mm``
+        (:mod:`labauto.vision.plate_scale`); 0 never upsamples.
     rim_margin_mm, rim_margin_px : float
         Width of the band inside the dish edge that is ignored (the wall's shadow). Colonies
         that touch the meniscus inside it are still found: only their part on the band is cut.
@@ -145,6 +148,7 @@ class PlateParams:
     dish_diameter_mm: float = 90.0
     px_per_mm: float | None = None
     analysis_px_per_mm: float = 12.0
+    min_analysis_px_per_mm: float = 8.0
     rim_margin_mm: float = 0.5
     rim_margin_px: float | None = None
     method: str = "segmentation"
@@ -189,6 +193,7 @@ class PlateParams:
             "noise_factor",
             "open_mm",
             "analysis_px_per_mm",
+            "min_analysis_px_per_mm",
             "min_colony_diameter_mm",
             "min_colony_area_px",
             "max_colony_area_px",
@@ -231,6 +236,10 @@ class PlateParams:
             raise ValueError(
                 "PlateParams.max_authentic_elongation must be >= 1, got "
                 f"{self.max_authentic_elongation!r}"
+            )
+        if 0 < self.analysis_px_per_mm < self.min_analysis_px_per_mm:
+            raise ValueError(
+                "PlateParams.min_analysis_px_per_mm must not exceed analysis_px_per_mm"
             )
         if self.faint_min_diameter_mm > self.faint_max_diameter_mm:
             raise ValueError(

@@ -74,9 +74,16 @@ def test_working_copy_maps_pixel_centres_both_ways() -> None:
     assert copy.px_per_mm == pytest.approx(12.0, rel=0.01)
     pts = np.array([[123.25, 77.5], [499.0, 349.0]])
     np.testing.assert_allclose(copy.to_original(copy.to_working(pts)), pts, atol=1e-9)
-    # a coarse image is used as it is
-    same = working_copy(image, (0.0, 0.0, 599.0, 399.0), 8.0, PlateParams())
+    # an image between the two scales is used as it is
+    same = working_copy(image, (0.0, 0.0, 599.0, 399.0), 9.0, PlateParams())
     assert same.factor == 1.0 and same.image is image
+    # a webcam frame is resampled up to the analysis scale
+    webcam = working_copy(image, (100.0, 50.0, 500.0, 350.0), 6.0, PlateParams())
+    assert webcam.factor == pytest.approx(2.0, rel=0.01)
+    assert webcam.px_per_mm == pytest.approx(12.0, rel=0.01)
+    np.testing.assert_allclose(webcam.to_original(webcam.to_working(pts)), pts, atol=1e-9)
+    off = working_copy(image, (0.0, 0.0, 599.0, 399.0), 6.0, PlateParams(min_analysis_px_per_mm=0))
+    assert off.factor == 1.0
 
 
 @pytest.mark.parametrize(("diameter_mm", "params"), [
