@@ -69,20 +69,27 @@ def test_a_long_one_peak_body_as_large_as_the_plates_colonies_counts_two() -> No
     assert sum(c.estimated_count for c in off) == sum(c.estimated_count for c in colonies) - 1
 
 
-def test_a_thin_crescent_beside_large_colonies_counts_one() -> None:
+def test_a_thin_crescent_beside_large_colonies_is_no_colony() -> None:
     # a beaded arc 12-15 px wide (a piece of a large colony that the rim's background cut
-    # away, as on AGAR plate 4904) beside colonies of radius 40 px: its bumps are peaks of the
-    # distance transform and the straight segments between them leave the curved body, so
-    # without the plate's yardstick every bump counted as a colony
+    # away, as on AGAR plate 4904) beside colonies of radius 40 px: no point of it is as far
+    # from its outline as 0.3 of theirs (12 px), and it is long, so it is a sliver, not
+    # reported; a small round colony (radius 8 px) is as thin but round, and stays
     singles = [(120, 150, 40), (120, 450, 40), (480, 450, 40)]
     arc = [
         (400 + 30 * math.cos(math.radians(a)), 250 + 30 * math.sin(math.radians(a)), 7.5 - i % 2)
         for i, a in enumerate(range(0, 100, 25))
     ]
-    img = _agar_with(singles + arc)
-    counts = [c.estimated_count for c in _analyse(img)]
-    assert counts == [1, 1, 1, 1]
-    assert sorted(c.estimated_count for c in _analyse_with(img, peak_floor_ratio=0.0))[-1] >= 3
+    img = _agar_with([*singles, *arc, (250, 300, 8)])
+    plate = PlateParams(region=(300.0, 300.0, 290.0), px_per_mm=10.0)
+    result = analyze_plate(img, plate)
+    assert result.rejected.get("sliver") == 1
+    assert sorted(round(c.centroid[0]) for c in result.colonies) == [120, 120, 250, 480]
+    # kept as a body, its bumps are peaks of the distance transform and the straight segments
+    # between them leave the curved body: the plate's yardstick counts it one, not several
+    counts = [c.estimated_count for c in _analyse_with(img, sliver_elongation=0.0)]
+    assert counts == [1, 1, 1, 1, 1]
+    no_floor = _analyse_with(img, sliver_elongation=0.0, peak_floor_ratio=0.0)
+    assert max(c.estimated_count for c in no_floor) >= 3
 
 
 def test_a_colony_with_a_translucent_centre_is_one_colony(monkeypatch: pytest.MonkeyPatch) -> None:
