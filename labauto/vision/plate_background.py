@@ -146,6 +146,7 @@ def hysteresis(dev: np.ndarray, usable: np.ndarray, high: float, low: float) -> 
 
 _RIM_SECTORS = 18  # sectors of 20 degrees: the radial profile is a median over each
 _RIM_ANGLES = 720  # angles sampled round the band (40 per sector)
+_PIXEL = np.dtype((np.void, 3))  # one BGR uint8 pixel as a single item
 
 
 def with_radial_rim(
@@ -181,11 +182,11 @@ def with_radial_rim(
     medians = np.median(band.reshape(_RIM_SECTORS, per, n_r, 3), axis=1).astype(np.float32)
     # sector centres, cyclically: row k of ``ring`` is the centre of sector k - 1
     ring = np.concatenate((medians[-1:], medians, medians[:1]))
-    # the band's pixels (flat indices), as (radius, angle) into the sector-median table
-    idx = np.flatnonzero(_annulus(h, w, cx, cy, r0 + 2.0, r + 2.0))
-    if idx.size == 0:
+    # the band's pixels, as (radius, angle) into the sector-median table
+    points = cv2.findNonZero(_annulus(h, w, cx, cy, r0 + 2.0, r + 2.0))
+    if points is None:
         return background
-    ys, xs = np.divmod(idx, w)
+    xs, ys = points.reshape(-1, 2).T
     dist, angle = (
         v.ravel()
         for v in cv2.cartToPolar(
@@ -198,10 +199,12 @@ def with_radial_rim(
     weight = (dist - np.float32(r - band_px)) * np.float32(1.0 / max(band_px / 3.0, 1.0))
     np.clip(weight, 0.0, 1.0, out=weight)
     out = background.copy()
-    flat = out.reshape(-1, 3)
-    here = flat[idx].astype(np.float32)
+    # one 3-byte item per pixel: gathering and scattering whole pixels is ~4x faster so
+    pixels = out.reshape(-1).view(_PIXEL)
+    idx = ys.astype(np.intp) * w + xs
+    here = np.take(pixels, idx).view(np.uint8).reshape(-1, 3).astype(np.float32)
     here += (lookup - here) * weight[:, None]
-    flat[idx] = cv2.convertScaleAbs(here.reshape(-1, 1, 3)).reshape(-1, 3)
+    np.put(pixels, idx, cv2.convertScaleAbs(here.reshape(-1, 1, 3)).reshape(-1).view(_PIXEL))
     return out
 
 

@@ -108,7 +108,6 @@ def faint_bodies(
     diff = cv2.GaussianBlur(cv2.subtract(img, background, dtype=cv2.CV_32F), (0, 0), sigma_mm * ppm)
     norm = cv2.sqrt(cv2.transform(cv2.multiply(diff, diff), np.ones((1, 3), np.float32)))
 
-    edge = _gradient_norm(diff)
     # the agar farther than margin_mm from its border (a distance transform: a wide erosion's
     # work in one pass)
     depth = cv2.distanceTransform(agar, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
@@ -140,7 +139,7 @@ def faint_bodies(
             continue
         ring = cv2.subtract(cv2.dilate(body, _RING), cv2.erode(body, _RING))
         contrast = float(np.median(norm[y : y + bh, x : x + bw][body > 0]))
-        sharpness = float(np.percentile(edge[y : y + bh, x : x + bw][ring > 0], 75))
+        sharpness = float(np.percentile(_edge_in(diff, (x, y, bw, bh))[ring > 0], 75))
         if sharpness < _MIN_EDGE * contrast:
             continue  # no edge: a drift of the agar's colour, not a colony
         kept.append(outline)
@@ -151,6 +150,20 @@ def faint_bodies(
     mask = cv2.resize(small_mask, (sw * step, sh * step), interpolation=cv2.INTER_LINEAR)
     empty[whole] = cv2.compare(mask, 127, cv2.CMP_GT)
     return empty
+
+
+def _edge_in(diff: np.ndarray, rect: tuple[int, int, int, int]) -> np.ndarray:
+    """:func:`_gradient_norm` of ``diff`` within ``rect`` (x, y, w, h), as over the whole image.
+
+    It is taken on the rectangle grown by the Sobel's 1 px wherever the image has it, so that
+    only the image's own border is reflected: the same values as on the whole image, for only
+    the few candidates that reach this test.
+    """
+    x, y, bw, bh = rect
+    x0, y0 = max(x - 1, 0), max(y - 1, 0)
+    x1, y1 = min(x + bw + 1, diff.shape[1]), min(y + bh + 1, diff.shape[0])
+    edge = _gradient_norm(diff[y0:y1, x0:x1])
+    return edge[y - y0 : y - y0 + bh, x - x0 : x - x0 + bw]
 
 
 def _gradient_norm(image: np.ndarray) -> np.ndarray:

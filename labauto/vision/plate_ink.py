@@ -37,6 +37,7 @@ INK_STROKE_MM = 1.6  # ... or narrower than this and over two discs ...
 INK_DOT_MM = 1.3  # ... or narrower than this, whatever its shape
 INK_SOLID = 0.75  # a dotted body has fewer of its pixels this dark (relative to its mean)
 INK_DOTS = 2  # ... and its dark pixels lie in at least this many pieces
+_PIXEL = np.dtype((np.void, 3))  # one BGR uint8 pixel as a single item
 
 
 def ink_bodies(
@@ -56,33 +57,56 @@ def ink_bodies(
     px_per_mm : float
         Pixels per millimetre of ``roi``.
     """
-    out = np.zeros(len(bodies.index), bool)
+    n = len(bodies.index)
+    out = np.zeros(n, bool)
     fill = bodies.area / np.maximum(math.pi * bodies.r_in**2, 1.0)
     thin = bodies.r_in < INK_STROKE_MM / 2 * px_per_mm
     dot = bodies.r_in < INK_DOT_MM / 2 * px_per_mm
     strokelike = (fill > INK_FILL) | (thin & (fill > 2.0)) | dot
-    for b in np.flatnonzero(which).tolist():
-        t, lft, h, w, r = (int(v[b]) for v in (bodies.top, bodies.left, bodies.height,
-                                                 bodies.width, bodies.row))  # fmt: skip
-        inside = bodies.mask[r : r + h, :w] > 0
-        if not inside.any():
-            continue
-        colour = roi[t : t + h, lft : lft + w][inside].astype(np.float32)
-        agar = np.maximum(background[t : t + h, lft : lft + w][inside].astype(np.float32), 1.0)
-        rel = colour.mean(axis=0) / agar.mean(axis=0) - 1.0  # B, G, R
-        # darker in all: the light that comes through, summed over B, G, R, per pixel
-        darkening = 1.0 - colour.sum(axis=1) / agar.sum(axis=1)
-        dark = float(darkening.mean())
-        if not (dark >= -INK_DARKER and rel[0] - rel[2] >= INK_BLUE_MARGIN):
-            continue
-        dark_px = darkening >= 0.5 * dark
-        dotted = np.mean(dark_px) < INK_SOLID and _pieces(inside, dark_px) >= INK_DOTS
-        out[b] = bool(strokelike[b] or dotted)
+    # every pixel of the bodies tested, at once, body after body (one body per canvas row)
+    points = cv2.findNonZero(bodies.mask)
+    if points is None:
+        return out
+    xs, ys = points.reshape(-1, 2).astype(np.intp).T.copy()
+    body = bodies.row_body[ys]
+    tested = which[body]
+    xs, ys, body = xs[tested], ys[tested], body[tested]
+    if body.size == 0:
+        return out
+    ys = ys - bodies.row[body] + bodies.top[body]  # ROI pixels
+    xs = xs + bodies.left[body]
+    at = ys * roi.shape[1] + xs
+    colour = _pixels(roi, at)
+    agar = np.maximum(_pixels(background, at), 1.0)
+    # darker in all: the light that comes through, summed over B, G, R, per pixel
+    darkening = 1.0 - (colour[:, 0] + colour[:, 1] + colour[:, 2]) / (
+        agar[:, 0] + agar[:, 1] + agar[:, 2]
+    )
+    present, start, size = np.unique(body, return_index=True, return_counts=True)
+
+    def means(values: np.ndarray) -> np.ndarray:  # per present body
+        return np.add.reduceat(values, start, axis=0) / size.reshape(-1, *[1] * (values.ndim - 1))
+
+    rel = means(colour) / means(agar) - 1.0  # the mean relative change in B, G, R
+    dark = means(darkening)
+    coloured = (dark >= -INK_DARKER) & (rel[:, 0] - rel[:, 2] >= INK_BLUE_MARGIN)
+    dark_px = darkening >= 0.5 * np.repeat(dark, size)
+    out[present] = coloured & strokelike[present]
+    solid = means(dark_px.astype(np.float64)) >= INK_SOLID
+    for i in np.flatnonzero(coloured & ~strokelike[present] & ~solid).tolist():
+        b, mine = int(present[i]), slice(start[i], start[i] + size[i])
+        canvas = np.zeros((int(bodies.height[b]), int(bodies.width[b])), np.uint8)
+        canvas[ys[mine] - bodies.top[b], xs[mine] - bodies.left[b]] = dark_px[mine]
+        out[b] = _pieces(canvas) >= INK_DOTS
     return out
 
 
-def _pieces(inside: np.ndarray, dark: np.ndarray) -> int:
-    """Connected pieces (8-neighbourhood) of the ``dark`` pixels of a body's mask ``inside``."""
-    canvas = np.zeros(inside.shape, np.uint8)
-    canvas[inside] = dark
-    return cv2.connectedComponents(canvas, connectivity=8)[0] - 1
+def _pixels(image: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """The BGR pixels of ``image`` (HxWx3 uint8) at flat indices ``at``, as float32 (N x 3)."""
+    flat = np.ascontiguousarray(image).reshape(-1).view(_PIXEL)
+    return np.take(flat, at).view(np.uint8).reshape(-1, 3).astype(np.float32)
+
+
+def _pieces(dark: np.ndarray) -> int:
+    """Connected pieces (8-neighbourhood) of the nonzero pixels of ``dark`` (uint8)."""
+    return cv2.connectedComponents(dark, connectivity=8)[0] - 1
