@@ -40,8 +40,10 @@ Pipeline and the choices it makes where the paper leaves room:
    pen strokes: a disc of radius r gives r, a strip of width w gives w); elongation
    ``sqrt(l1 / l2)`` of the second moments above ``max_elongation`` (glare streaks, straight
    strokes; the paper's DES limit is about 1:4); area above ``max_fill_ratio`` times the largest
-   inscribed disc (curved or closed pen writing); printed or written ink (black or blue, stroke-
-   shaped, dot-sized or dotted: :mod:`labauto.vision.plate_ink`). The body's mask is its filled
+   inscribed disc (curved or closed pen writing), unless it is as wide as the plate's colonies
+   (``chain_ratio``: a chain of colonies along a streak, counted as a merged body); printed or
+   written ink (black or blue, stroke-shaped, dot-sized or dotted:
+   :mod:`labauto.vision.plate_ink`). The body's mask is its filled
    contour restricted to the foreground (a loop of ink is not solid) and closed with a 5x5 disc;
    holes under a tenth of it are filled (translucent centres, ``plate_bodies.HOLE_SHARE``).
 4. **Classes.** Authentic: a DES, i.e. centroid inside and D_alpha (median by default) below
@@ -415,19 +417,28 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     # a DES needs its centroid inside and a small D_alpha; only then does the waist matter
     des_shape = np.asarray(inside, bool) & (np.asarray(d_alpha) < params.des_threshold_deg)
     bodies = measure_bodies(contours, fg, des_shape, params, rejected)
+    stroke_shaped = bodies.stroke.copy()
+    ppm = float(params.px_per_mm or 0.0)
     if params.reject_ink:
-        ink = ink_bodies(roi, background, bodies, ~bodies.stroke, float(params.px_per_mm or 0.0))
+        ink = ink_bodies(roi, background, bodies, ~bodies.stroke, ppm)
         if ink.any():
             rejected["ink"] = int(ink.sum())
             bodies.stroke |= ink
     des = des_shape[bodies.index] & (bodies.concavity < params.max_concavity) & ~bodies.stroke
     des &= bodies.elongation <= params.max_authentic_elongation
+    # the plate's yardstick: the inscribed radius of its single colonies
+    single_r_in = float(np.median(bodies.r_in[des])) if des.sum() >= MIN_SINGLES else 0.0
+    if params.chain_ratio > 0 and single_r_in > 0:  # as wide as a colony: a chain of them
+        chain = stroke_shaped & (bodies.r_in >= params.chain_ratio * single_r_in)
+        if params.reject_ink and chain.any():
+            chain &= ~ink_bodies(roi, background, bodies, chain, ppm)
+        if chain.any():
+            rejected["stroke"] -= int(chain.sum())
+            bodies.stroke &= ~chain
     stage_done("measures")
     # every body is counted: a DES holding two peaks apart (two colonies that meet in a shallow
     # waist) is merged, never offered for picking
-    least_peak = 0.0
-    if des.sum() >= MIN_SINGLES:  # a peak far thinner than the plate's colonies is no centre
-        least_peak = params.peak_floor_ratio * float(np.median(bodies.r_in[des]))
+    least_peak = params.peak_floor_ratio * single_r_in  # thinner: no colony's centre
     if params.sliver_elongation > 0 and least_peak > 0:  # no centre anywhere, and long
         sliver = ~bodies.stroke & (bodies.r_in < least_peak)
         sliver &= bodies.elongation >= params.sliver_elongation

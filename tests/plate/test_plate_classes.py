@@ -109,3 +109,28 @@ def test_a_ring_with_a_wide_hole_is_not_reported() -> None:
     img = _agar_with([(300.0, 300.0, 40.0)])
     cv2.circle(img, (300, 300), 24, AGAR_BGR, -1, cv2.LINE_AA)
     assert _analyse(img) == []
+
+
+def test_a_chain_of_colonies_along_a_streak_is_counted_not_taken_for_a_stroke() -> None:
+    # seven colonies of radius 20 px touching along a bent streak (an arc of radius 60 px):
+    # their body is larger than five inscribed discs (the stroke test), yet as wide as the
+    # plate's colonies; a zigzag pen line 1 mm wide in the same colour stays a stroke
+    singles = [(150, 450, 20), (300, 480, 20), (450, 450, 20)]
+    step = 36 / 60  # radians between neighbours: centres 36 px apart
+    chain = [(200 + 60 * math.cos(k * step), 200 + 60 * math.sin(k * step), 20) for k in range(7)]
+    img = _agar_with(singles + chain)
+    pen = np.array([[360, 180], [470, 220], [380, 270], [480, 330]], np.int32)
+    cv2.polylines(img, [pen], False, COLONY_BGR, 10, cv2.LINE_AA)
+
+    def analysed(**params: float):
+        plate = PlateParams(region=(300.0, 300.0, 290.0), px_per_mm=10.0, **params)  # type: ignore[arg-type]
+        return analyze_plate(img, plate)
+
+    result = analysed()
+    assert result.rejected.get("stroke") == 1  # the pen line
+    merged = [c for c in result.colonies if c.klass == "merged"]
+    assert len(merged) == 1 and merged[0].estimated_count == 7
+    assert sum(c.estimated_count for c in result.colonies) == 10
+    off = analysed(chain_ratio=0.0)
+    assert off.rejected.get("stroke") == 2
+    assert sum(c.estimated_count for c in off.colonies) == 3
