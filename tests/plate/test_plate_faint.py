@@ -1,0 +1,51 @@
+"""The faint pass on hand-made agar: wide, low-contrast colonies and what is not one."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from labauto.vision import plate_faint
+from labauto.vision.plate_faint import faint_bodies
+
+PX_PER_MM = 10.0
+AGAR_BGR = (150.0, 190.0, 205.0)
+
+
+def _agar_with_soft_disc(radius_mm: float, edge_mm: float, contrast: float) -> np.ndarray:
+    """600 px of flat agar (10 px/mm, sensor noise) with a darker disc whose edge is a Gaussian
+    ramp of ``edge_mm`` (sigma) and ``contrast`` grey levels deep in every channel."""
+    disc = np.zeros((600, 600), np.float32)
+    cv2.circle(disc, (300, 300), round(radius_mm * PX_PER_MM), 1.0, -1, cv2.LINE_AA)
+    disc = cv2.GaussianBlur(disc, (0, 0), edge_mm * PX_PER_MM)
+    img = np.empty((600, 600, 3), np.float32)
+    img[:] = AGAR_BGR
+    img -= contrast * disc[..., None]
+    img += np.random.default_rng(0).normal(0.0, 2.0, img.shape)
+    return np.clip(img + 0.5, 0, 255).astype(np.uint8)
+
+
+def _found(img: np.ndarray) -> bool:
+    usable = np.zeros(img.shape[:2], np.uint8)
+    cv2.circle(usable, (300, 300), 290, 255, -1)
+    found = faint_bodies(img, usable, np.zeros_like(usable), PX_PER_MM, margin_mm=1.0)
+    return bool(found[300, 300])
+
+
+def test_a_large_colony_with_a_soft_edge_is_found(monkeypatch: pytest.MonkeyPatch) -> None:
+    # 8 mm across, 8 grey levels, its edge a Gaussian ramp of sigma 0.4 mm (found where it is
+    # a fifth deep, the outline lies on its tail), as the large translucent colonies of AGAR
+    # plates 12031 and 11924: sharp for its size, though not within a millimetre
+    img = _agar_with_soft_disc(4.0, 0.4, 8.0)
+    assert _found(img)
+    # the former rule (an edge within a millimetre, whatever the size) missed it
+    monkeypatch.setattr(plate_faint, "_EDGE_RADII", 0.0)
+    monkeypatch.setattr(plate_faint, "_LEAST_EDGE", 0.25)
+    assert not _found(img)
+
+
+def test_a_drift_of_the_agar_is_no_colony() -> None:
+    # as deep, but fading with sigma 1 mm (measured: from 0.5 mm on, nothing is found): a
+    # change of the agar, not a colony's edge
+    assert not _found(_agar_with_soft_disc(4.0, 1.0, 8.0))
