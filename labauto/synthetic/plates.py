@@ -350,10 +350,13 @@ def _draw_des(
     des: _Des,
     colour_of: Any,
     rng: np.random.Generator,
+    opacity: float = 1.0,
 ) -> None:
     """Draw a colony with soft edge, dome shading and a highlight; mark ``cover`` (alpha > .5).
 
     ``colour_of(x, y, rho, t)`` returns the body colour (RGB, per pixel or one colour).
+    ``opacity`` below 1 draws a translucent colony: the agar shows through it, so its shading
+    and highlight depart from the agar by that share too, as its colour does.
     """
     x0, y0, x1, y1 = _roi(des.cx, des.cy, des.bound + 2.0, cover.shape)
     xs, ys = _grid(x0, y0, x1, y1)
@@ -363,13 +366,13 @@ def _draw_des(
     alpha = np.clip(edge_dist / 1.6 + 0.5, 0.0, 1.0).astype(np.float32)
     depth = np.sqrt(np.clip(1.0 - rho * rho, 0.0, 1.0))
     shade = (0.86 + 0.16 * depth)[..., None]
-    opacity = (0.88 + 0.12 * depth)[..., None]
+    cover_share = (0.88 + 0.12 * depth) * opacity
     hx, hy = rng.uniform(-0.35, 0.35, 2) * des.a
     sigma = 0.3 * des.b
     glint = 18.0 * np.exp(-((xs - des.cx - hx) ** 2 + (ys - des.cy - hy) ** 2) / (2 * sigma**2))
     body = np.asarray(colour_of(xs, ys, rho, t), dtype=np.float32)
     colour = np.clip(body * shade + glint[..., None], 0.0, 255.0)
-    _blend(canvas[..., :], alpha * opacity[..., 0], colour, x0, y0)
+    _blend(canvas[..., :], alpha * cover_share, colour, x0, y0)
     cover[y0:y1, x0:x1] |= alpha > 0.5
 
 
@@ -523,7 +526,8 @@ def generate_plate(
         ``n_authentic`` this makes a crowded plate (e.g. 0.3 and 1000 colonies).
     faint_fraction : float
         Share of the authentic colonies drawn faint and translucent: ``faint_contrast`` of their
-        colour's difference from the agar.
+        colour's difference from the agar, and of their dome shading and highlight (the agar
+        shows through all of it).
     faint_contrast : float
         Share (0-1] of a faint colony's colour difference from the agar that is drawn: 0.25 gives
         10-25 grey levels of contrast, 0.08 the 3-8 levels of large translucent colonies on pale
@@ -676,9 +680,7 @@ def generate_plate(
         near = kind == "authentic" and rng.uniform() < 0.2
         colour = _pick_colour(rng, agar_rgb, near_agar=near)
         faint = kind == "authentic" and faint_fraction > 0 and rng.uniform() < faint_fraction
-        if faint:
-            colour = agar_rgb + faint_contrast * (colour - agar_rgb)  # faint and translucent
-            near = True
+        near |= faint
         style = ""
         if kind == "mixed":
             second = _pick_second_species(rng, agar_rgb, colour)
@@ -687,8 +689,11 @@ def generate_plate(
         else:
             colour_of = lambda *_, c=colour: c  # noqa: E731
             colours = [colour]
+        opacity = faint_contrast if faint else 1.0  # faint: translucent, the agar shows through
+        if faint:
+            colours = [agar_rgb + faint_contrast * (colour - agar_rgb)]
         body_cover = np.zeros_like(cover)
-        _draw_des(canvas, body_cover, des, colour_of, rng)
+        _draw_des(canvas, body_cover, des, colour_of, rng, opacity)
         if faint and ring_edge > 0:
             _draw_ring_edge(canvas, des, ring_edge, 4.0 * k)
         body_cover &= dist < radius  # a colony at the meniscus is cut by the agar's edge
