@@ -264,7 +264,11 @@ def mix_scores(
 
 
 def merged_counts(
-    bodies: Bodies, which: np.ndarray, valley_ratio: float, least_peak: float = 0.0
+    bodies: Bodies,
+    which: np.ndarray,
+    valley_ratio: float,
+    least_peak: float = 0.0,
+    round_outline: np.ndarray | None = None,
 ) -> np.ndarray:
     """Colonies in each merged body (where ``which`` is true; 1 elsewhere), all at once.
 
@@ -276,6 +280,14 @@ def merged_counts(
     lower of the two. At least ``MIN_MERGED_COUNT`` (1). The segments between all pairs of
     peaks of a body are sampled at once. ``least_peak`` (px) is the plate's yardstick for a
     colony's centre (:attr:`PlateParams.peak_floor_ratio`); 0 leaves it out.
+
+    The bodies where ``round_outline`` is true (their outline is a DES: centroid inside, small
+    D_alpha) are counted with all their holes filled: round a hole the distance transform has
+    a ring of peaks, and a round outline with a hole is one colony with a translucent part or a
+    reflection across it (AGAR plates 14130 and 14627 had such colonies counted 4-6). A chain of
+    colonies closed round a patch of agar has no round outline, and keeps its hole. Measured on
+    the AGAR photographs: reported 1575 -> 1565, matched 1485 either way (F1 0.858 -> 0.861);
+    filling the holes of every body also took 5 matched colonies of such chains.
     """
     counts = np.ones(len(bodies.index), np.intp)
     if not which.any():
@@ -287,7 +299,13 @@ def merged_counts(
     dt, row_body = bodies.dt[rows], bodies.row_body[rows]
     first_row = np.zeros(len(slot), np.intp)
     first_row[which] = np.cumsum(slot[which]) - slot[which]
-    floor = np.maximum(max(2.0, least_peak), 0.3 * bodies.r_in)
+    r_in = bodies.r_in
+    if round_outline is not None and (round_outline & which).any():
+        solid = _holes_filled(bodies.mask[rows], row_body, round_outline)
+        dt = cv2.distanceTransform(solid, cv2.DIST_L2, 3)
+        r_in = np.zeros(len(slot))
+        r_in[which] = np.maximum.reduceat(dt.max(axis=1), first_row[which])
+    floor = np.maximum(max(2.0, least_peak), 0.3 * r_in)
     floor_of_row = np.where(row_body >= 0, floor[np.maximum(row_body, 0)], np.inf)
     cand = (dt >= cv2.dilate(dt, _DISC5)) & (dt >= floor_of_row[:, None])
     n, labels = cv2.connectedComponents(cand.view(np.uint8), connectivity=8)
@@ -339,6 +357,23 @@ def merged_counts(
                 kept.append(j)
         counts[body[lo]] = max(MIN_MERGED_COUNT, len(kept))
     return counts
+
+
+def _holes_filled(mask: np.ndarray, row_body: np.ndarray, bodies: np.ndarray) -> np.ndarray:
+    """Canvas ``mask`` (0 / 1; ``row_body``: the body of every row) with every hole of the
+    bodies where ``bodies`` is true filled. A hole is background that the background round the
+    crops (4-connected) does not reach."""
+    outside = np.zeros((mask.shape[0] + 2, mask.shape[1] + 2), np.uint8)
+    cv2.floodFill(mask.copy(), outside, (0, 0), 1, 0, 0, 4 | (1 << 8) | cv2.FLOODFILL_MASK_ONLY)
+    holes = cv2.compare(outside[1:-1, 1:-1], 0, cv2.CMP_EQ) & cv2.compare(mask, 0, cv2.CMP_EQ)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(holes, connectivity=4)
+    if n <= 1:
+        return mask
+    fill = np.zeros(n, bool)
+    fill[1:] = bodies[row_body[stats[1:, cv2.CC_STAT_TOP]]]
+    out = mask.copy()
+    out[fill[labels]] = 1
+    return out
 
 
 def pair_counts(

@@ -134,3 +134,25 @@ def test_a_chain_of_colonies_along_a_streak_is_counted_not_taken_for_a_stroke() 
     off = analysed(chain_ratio=0.0)
     assert off.rejected.get("stroke") == 2
     assert sum(c.estimated_count for c in off.colonies) == 3
+
+
+def test_a_round_colony_with_a_wide_translucent_centre_counts_one(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # a colony of radius 40 px with a patch of the agar's colour in it (radius 15 px, 14 % of
+    # it: not filled as a small hole; 14 px off the centre, as the translucent part of the
+    # colony of AGAR plate 14130), beside three single colonies: round the hole the distance
+    # transform has a ring of peaks, and the body was counted as four colonies (the ring pass,
+    # which would fill this hole as a ring colony of its own, is off)
+    singles = [(120, 150, 30), (120, 450, 30), (480, 450, 30)]
+    img = _agar_with([*singles, (400.0, 220.0, 40.0)])
+    cv2.circle(img, (386, 220), 15, AGAR_BGR, -1, cv2.LINE_AA)
+
+    def largest():  # the holed colony
+        return max(_analyse_with(img, find_rings=False), key=lambda c: c.area_px)
+
+    assert largest().klass == "merged"  # the hole is a pocket as deep as a waist: not offered
+    assert largest().estimated_count == 1
+    # counted on the body as it is, the ring of peaks reads as two colonies or more
+    monkeypatch.setattr("labauto.vision.plate_bodies._holes_filled", lambda mask, *_: mask)
+    assert largest().estimated_count >= 2

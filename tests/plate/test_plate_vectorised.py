@@ -55,6 +55,21 @@ def _reference_body(contour: np.ndarray, fg: np.ndarray, params: PlateParams) ->
     }
 
 
+def _reference_count_dt(ref: dict, round_outline: bool) -> np.ndarray:
+    """The distance transform step 5 counts on: of the mask with every hole filled when the
+    outline is a DES (holes: background not 4-connected to the crop's border)."""
+    if not round_outline:
+        return ref["dt"]
+    mask = ref["mask"].copy()
+    n, background = cv2.connectedComponents((mask == 0).astype(np.uint8), connectivity=4)
+    edges = (background[0], background[-1], background[:, 0], background[:, -1])
+    border = set(np.unique(np.concatenate(edges)).tolist())
+    for label in range(1, n):
+        if label not in border:
+            mask[background == label] = 1
+    return cv2.distanceTransform(mask, cv2.DIST_L2, 3)
+
+
 def _reference_merged_count(dt: np.ndarray, valley_ratio: float, least_peak: float = 0.0) -> int:
     """Step 5 on one body's crop, peak after peak."""
     peak_max = float(dt.max())
@@ -106,16 +121,19 @@ def _reference_mix_score(roi: np.ndarray, body: dict, params: PlateParams) -> fl
 def _with_translucent_centres(img: np.ndarray, truth: object) -> np.ndarray:
     """``img`` with an agar-coloured centre painted into every authentic colony: a radius of
     0.25 of the colony's (a hole of ~6 %, filled by the analysis) or, every third, 0.6 (~36 %,
-    left open)."""
+    left open; a ring, dropped as a stroke), or, every third but one, 0.4 a tenth of the
+    radius off the centre (~16 %; where neither the ring pass nor the line opening closes or
+    opens it, a DES-shaped body whose count is taken with its hole filled)."""
     out = img.copy()
     agar = tuple(int(v) for v in np.median(img[img.shape[0] // 2 - 40 : img.shape[0] // 2 + 40,
                                                img.shape[1] // 2 - 40 : img.shape[1] // 2 + 40]
                                            .reshape(-1, 3), axis=0))  # fmt: skip
     authentic = [c for c in truth.colonies if c.kind == "authentic"]  # type: ignore[attr-defined]
     for i, colony in enumerate(authentic):
-        radius = np.sqrt(colony.area_px / np.pi) * (0.6 if i % 3 == 2 else 0.25)
-        centre = tuple(round(v) for v in colony.center)
-        cv2.circle(out, centre, max(round(radius), 2), agar, -1)
+        r = np.sqrt(colony.area_px / np.pi)
+        share, off = ((0.25, 0.0), (0.4, 0.1), (0.6, 0.0))[i % 3]
+        centre = (round(colony.center[0] + off * r), round(colony.center[1]))
+        cv2.circle(out, centre, max(round(share * r), 2), agar, -1)
     return out
 
 
@@ -164,20 +182,27 @@ def test_vectorised_mix_scores_and_merged_counts_equal_per_body(
     stages: list, least_peak: float
 ) -> None:
     floored = 0  # bodies whose count the floor changed: the floor must be exercised
-    for roi, contours, fg, _, bodies, params in stages:
+    filled = 0  # DES-shaped bodies with holes, counted filled: the path must be exercised
+    for roi, contours, fg, des_shape, bodies, params in stages:
         everyone = ~bodies.stroke
+        round_outline = des_shape[bodies.index]
         scores = plate_bodies.mix_scores(roi, bodies, everyone, params)
-        counts = plate_bodies.merged_counts(bodies, everyone, params.valley_ratio, least_peak)
+        counts = plate_bodies.merged_counts(
+            bodies, everyone, params.valley_ratio, least_peak, round_outline
+        )
         for b, k in enumerate(bodies.index):
             if not everyone[b]:
                 assert scores[b] == 0.0 and counts[b] == 1
                 continue
             ref = _reference_body(contours[k], fg, params)
             assert scores[b] == pytest.approx(_reference_mix_score(roi, ref, params), abs=1e-12)
-            expected = _reference_merged_count(ref["dt"], params.valley_ratio, least_peak)
+            dt = _reference_count_dt(ref, bool(round_outline[b]))
+            expected = _reference_merged_count(dt, params.valley_ratio, least_peak)
             assert counts[b] == expected
-            floored += expected != _reference_merged_count(ref["dt"], params.valley_ratio)
+            floored += expected != _reference_merged_count(dt, params.valley_ratio)
+            filled += bool(np.any(dt != ref["dt"]))
     assert (floored > 0) == (least_peak > 0)
+    assert filled > 0
 
 
 def test_unit_weight_deviation_equals_the_weighted_formula(plates: list) -> None:
