@@ -113,7 +113,7 @@ from labauto.vision.plate_bodies import (
     pair_counts,
 )
 from labauto.vision.plate_faint import faint_bodies
-from labauto.vision.plate_ink import ink_bodies
+from labauto.vision.plate_ink import ink_bodies, without_ink
 from labauto.vision.plate_params import Circle, PlateParams
 from labauto.vision.plate_rings import ring_bodies
 from labauto.vision.plate_scale import WorkingCopy, image_scale, pixel_params, working_copy
@@ -448,11 +448,17 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
             rejected["sliver"] = int(sliver.sum())
             bodies.stroke |= sliver
             des &= ~sliver
+    # printed characters touching a colony are not counted as colonies
+    count_mask, inked = None, np.zeros(len(des), bool)
+    if params.reject_ink:
+        found = without_ink(roi, background, bodies, ~bodies.stroke & ~des)
+        if found is not None:
+            count_mask, inked = found
     counts = merged_counts(
-        bodies, ~bodies.stroke, params.valley_ratio, least_peak, des_shape[bodies.index]
+        bodies, ~bodies.stroke, params.valley_ratio, least_peak, des_shape[bodies.index], count_mask
     )
     des &= counts == 1
-    counts = pair_counts(bodies, counts, des, params.pair_elongation)
+    counts = np.where(inked, counts, pair_counts(bodies, counts, des, params.pair_elongation))
     mix = mix_scores(roi, bodies, des, params)
 
     colonies: list[Colony] = []

@@ -154,5 +154,28 @@ def test_a_round_colony_with_a_wide_translucent_centre_counts_one(
     assert largest().klass == "merged"  # the hole is a pocket as deep as a waist: not offered
     assert largest().estimated_count == 1
     # counted on the body as it is, the ring of peaks reads as two colonies or more
-    monkeypatch.setattr("labauto.vision.plate_bodies._holes_filled", lambda mask, *_: mask)
+    monkeypatch.setattr("labauto.vision.plate_bodies.holes_filled", lambda mask, *_: mask)
     assert largest().estimated_count >= 2
+
+
+def test_a_printed_character_touching_a_colony_is_not_counted(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # a bold dotted character (11 dots of radius 10 px, grey: every channel at 45 % of the
+    # agar's) on the lid, seen across a colony of radius 30 px that it touches: one body, the
+    # colony's colour too much of it to be ink, and each dot a peak of the distance transform
+    singles = [(120, 150, 20), (120, 450, 20), (480, 450, 20)]
+    img = _agar_with([*singles, (280.0, 260.0, 30.0)])
+    ink = tuple(round(0.45 * v) for v in AGAR_BGR)
+    for k in range(11):
+        a = math.radians(180 + 30 * k)
+        centre = (round(352 + 38 * math.cos(a)), round(260 + 38 * math.sin(a)))
+        cv2.circle(img, centre, 10, ink, -1, cv2.LINE_AA)
+
+    def body():  # the colony with the character
+        return max(_analyse(img), key=lambda c: c.area_px)
+
+    assert body().klass == "merged"
+    assert body().estimated_count == 1  # the character's pixels left out of the count
+    monkeypatch.setattr("labauto.vision.plate_ink.INK_SHARE", 2.0)  # never left out
+    assert body().estimated_count >= 8
