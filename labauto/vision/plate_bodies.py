@@ -368,18 +368,12 @@ def merged_counts(
 def holes_filled(mask: np.ndarray, row_body: np.ndarray, bodies: np.ndarray) -> np.ndarray:
     """Canvas ``mask`` (0 / 1; ``row_body``: the body of every row) with every hole of the
     bodies where ``bodies`` is true filled. A hole is background that the background round the
-    crops (4-connected) does not reach."""
+    crops (4-connected) does not reach; it lies in the rows of the body round it."""
     outside = np.zeros((mask.shape[0] + 2, mask.shape[1] + 2), np.uint8)
     cv2.floodFill(mask.copy(), outside, (0, 0), 1, 0, 0, 4 | (1 << 8) | cv2.FLOODFILL_MASK_ONLY)
     holes = cv2.compare(outside[1:-1, 1:-1], 0, cv2.CMP_EQ) & cv2.compare(mask, 0, cv2.CMP_EQ)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(holes, connectivity=4)
-    if n <= 1:
-        return mask
-    fill = np.zeros(n, bool)
-    fill[1:] = bodies[row_body[stats[1:, cv2.CC_STAT_TOP]]]
-    out = mask.copy()
-    out[fill[labels]] = 1
-    return out
+    holes[~((row_body >= 0) & bodies[np.maximum(row_body, 0)])] = 0
+    return mask | (holes & 1)
 
 
 def pair_counts(

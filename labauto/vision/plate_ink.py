@@ -143,9 +143,11 @@ def without_ink(
     at = (cy - bodies.row[body] + bodies.top[body]) * roi.shape[1] + cx + bodies.left[body]
     colour = _pixels(roi, at)
     agar = np.maximum(_pixels(background, at), 1.0)
-    darkening = 1.0 - colour.sum(axis=1) / agar.sum(axis=1)
-    rel = colour / agar - 1.0
-    ink = (darkening >= INK_PIXEL_DARKER) & (rel[:, 0] - rel[:, 2] >= INK_BLUE_MARGIN)
+    darkening = 1.0 - (colour[:, 0] + colour[:, 1] + colour[:, 2]) / (
+        agar[:, 0] + agar[:, 1] + agar[:, 2]
+    )
+    blue_over_red = colour[:, 0] / agar[:, 0] - colour[:, 2] / agar[:, 2]  # relative changes
+    ink = (darkening >= INK_PIXEL_DARKER) & (blue_over_red >= INK_BLUE_MARGIN)
     n = len(merged)
     share = np.bincount(body[ink], minlength=n) / np.maximum(bodies.area, 1.0)
     rest = ~ink
