@@ -55,6 +55,9 @@ class RunControl:
         self.on_estop = on_estop
         self.on_change = on_change
         self.estop_error: BaseException | None = None
+        # called at every safe point, in the run's thread, before the checks (the run's lease:
+        # a run whose lease was taken over stops at the very next safe point)
+        self.guard: Callable[[], None] | None = None
 
     @property
     def paused(self) -> bool:
@@ -118,6 +121,7 @@ class RunControl:
         ------
         EmergencyStop, StopRequested
         """
+        self._guard()
         self.raise_if_stopped()
         if self.paused:
             if on_pause is not None:
@@ -125,7 +129,12 @@ class RunControl:
             self._running.wait()
             if on_pause is not None:
                 on_pause(False)
+            self._guard()  # a long pause: look again
         self.raise_if_stopped()
+
+    def _guard(self) -> None:
+        if self.guard is not None:
+            self.guard()
 
     def raise_if_stopped(self) -> None:
         """Raise ``EmergencyStop`` or ``StopRequested`` if one was asked for."""

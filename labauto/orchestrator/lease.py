@@ -3,7 +3,10 @@
 The lease itself (take, refresh, release, in one transaction each) is the store's
 (:mod:`labauto.store.leases`). :class:`LeaseKeeper` refreshes it every ``heartbeat_s``; if another
 process has taken it over, the keeper asks the run to stop at its next safe point, so two
-processes never go on driving one workcell.
+processes never go on driving one workcell. The run's safe points also look themselves
+(:meth:`LeaseKeeper.verify`, in the run's thread): a beat a tenth of a second late, or one that
+found the database busy, would otherwise let the run start another pick on a lease it no
+longer holds.
 """
 
 from __future__ import annotations
@@ -31,17 +34,35 @@ class LeaseKeeper(threading.Thread):
         self.on_lost = on_lost
         self.lost: str | None = None
         self._done = threading.Event()
+        self._lock = threading.Lock()
 
     def run(self) -> None:
         while not self._done.wait(self.period_s):
+            if not self.beat():
+                return
+
+    def verify(self) -> None:
+        """Refresh the lease now, in the caller's thread (a safe point of the run)."""
+        self.beat()
+
+    def beat(self) -> bool:
+        """Refresh the lease; False (and ``on_lost`` called, once) if it was taken over.
+
+        A busy database counts as held: the next beat tries again.
+        """
+        with self._lock:
+            if self.lost is not None:
+                return False
             try:
                 self.store.heartbeat(self.run_id, self.owner)
             except LeaseLost as exc:
                 self.lost = str(exc)
-                self.on_lost(self.lost)
-                return
             except Exception:  # a busy database: try again at the next beat
-                continue
+                return True
+            else:
+                return True
+        self.on_lost(self.lost)
+        return False
 
     def stop(self) -> None:
         self._done.set()

@@ -180,6 +180,7 @@ def open_run(
             control.stop()
 
         keeper = LeaseKeeper(store, run_id, owner, config.run.heartbeat_s, lease_lost)
+        control.guard = keeper.verify
         keeper.start()
         stack.callback(keeper.stop)
         poller = _ControlPoller(store, run_id, control)

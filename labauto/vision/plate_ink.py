@@ -81,25 +81,10 @@ def ink_bodies(
     thin = bodies.r_in < INK_STROKE_MM / 2 * px_per_mm
     dot = bodies.r_in < INK_DOT_MM / 2 * px_per_mm
     strokelike = (fill > INK_FILL) | (thin & (fill > 2.0)) | dot
-    # every pixel of the bodies tested, at once, body after body (one body per canvas row)
-    points = cv2.findNonZero(bodies.mask)
-    if points is None:
+    pixels = _body_pixels(roi, background, bodies, which)
+    if pixels is None:
         return out
-    xs, ys = points.reshape(-1, 2).astype(np.intp).T.copy()
-    body = bodies.row_body[ys]
-    tested = which[body]
-    xs, ys, body = xs[tested], ys[tested], body[tested]
-    if body.size == 0:
-        return out
-    ys = ys - bodies.row[body] + bodies.top[body]  # ROI pixels
-    xs = xs + bodies.left[body]
-    at = ys * roi.shape[1] + xs
-    colour = _pixels(roi, at)
-    agar = np.maximum(_pixels(background, at), 1.0)
-    # darker in all: the light that comes through, summed over B, G, R, per pixel
-    darkening = 1.0 - (colour[:, 0] + colour[:, 1] + colour[:, 2]) / (
-        agar[:, 0] + agar[:, 1] + agar[:, 2]
-    )
+    cx, cy, body, colour, agar, darkening = pixels
     present, start, size = np.unique(body, return_index=True, return_counts=True)
 
     def means(values: np.ndarray) -> np.ndarray:  # per present body
@@ -114,7 +99,7 @@ def ink_bodies(
     for i in np.flatnonzero(coloured & ~strokelike[present] & ~solid).tolist():
         b, mine = int(present[i]), slice(start[i], start[i] + size[i])
         canvas = np.zeros((int(bodies.height[b]), int(bodies.width[b])), np.uint8)
-        canvas[ys[mine] - bodies.top[b], xs[mine] - bodies.left[b]] = dark_px[mine]
+        canvas[cy[mine] - bodies.row[b], cx[mine]] = dark_px[mine]
         out[b] = _pieces(canvas) >= INK_DOTS
     return out
 
@@ -133,19 +118,10 @@ def without_ink(
     the ink pixels, holes filled, are a stroke or dots (area over ``INK_FILL`` inscribed discs),
     not a round body (a grey colony touching a yellow one).
     """
-    points = cv2.findNonZero(bodies.mask)
-    if points is None or not merged.any():
+    pixels = _body_pixels(roi, background, bodies, merged)
+    if pixels is None:
         return None
-    cx, cy = points.reshape(-1, 2).astype(np.intp).T.copy()  # canvas pixels
-    body = bodies.row_body[cy]
-    tested = merged[body]
-    cx, cy, body = cx[tested], cy[tested], body[tested]
-    at = (cy - bodies.row[body] + bodies.top[body]) * roi.shape[1] + cx + bodies.left[body]
-    colour = _pixels(roi, at)
-    agar = np.maximum(_pixels(background, at), 1.0)
-    darkening = 1.0 - (colour[:, 0] + colour[:, 1] + colour[:, 2]) / (
-        agar[:, 0] + agar[:, 1] + agar[:, 2]
-    )
+    cx, cy, body, colour, agar, darkening = pixels
     blue_over_red = colour[:, 0] / agar[:, 0] - colour[:, 2] / agar[:, 2]  # relative changes
     ink = (darkening >= INK_PIXEL_DARKER) & (blue_over_red >= INK_BLUE_MARGIN)
     n = len(merged)
@@ -175,6 +151,31 @@ def without_ink(
     out = bodies.mask.copy()
     out[cy[ink], cx[ink]] = 0
     return out, inked & merged
+
+
+def _body_pixels(
+    roi: np.ndarray, background: np.ndarray, bodies: Any, which: np.ndarray
+) -> tuple[np.ndarray, ...] | None:
+    """Every pixel of the bodies where ``which`` is true, at once, body after body (one body
+    per canvas row): canvas x and y, body, BGR colour and agar colour (float32, the agar at
+    least 1), and the darkening ``1 - (B + G + R) / (agar's B + G + R)`` (the light that comes
+    through, summed over the channels); None when there is none."""
+    points = cv2.findNonZero(bodies.mask)
+    if points is None:
+        return None
+    cx, cy = points.reshape(-1, 2).astype(np.intp).T.copy()
+    body = bodies.row_body[cy]
+    tested = which[body]
+    if not tested.any():
+        return None
+    cx, cy, body = cx[tested], cy[tested], body[tested]
+    at = (cy - bodies.row[body] + bodies.top[body]) * roi.shape[1] + cx + bodies.left[body]
+    colour = _pixels(roi, at)
+    agar = np.maximum(_pixels(background, at), 1.0)
+    darkening = 1.0 - (colour[:, 0] + colour[:, 1] + colour[:, 2]) / (
+        agar[:, 0] + agar[:, 1] + agar[:, 2]
+    )
+    return cx, cy, body, colour, agar, darkening
 
 
 def _pixels(image: np.ndarray, at: np.ndarray) -> np.ndarray:

@@ -191,11 +191,16 @@ def test_one_serial_port_is_driven_by_one_run_at_a_time(tmp_path, plugins):
         gantry.stop()
 
 
-def test_a_run_whose_lease_is_taken_over_stops_at_the_next_safe_point(tmp_path, plugins):
+@pytest.mark.parametrize("heartbeat_s", [0.1, 30.0])
+def test_a_run_whose_lease_is_taken_over_stops_at_the_next_safe_point(
+    tmp_path, plugins, heartbeat_s
+):
+    # with a 30 s heartbeat the keeper's thread never beats during the run: the safe point's
+    # own look at the lease stops it, before the next pick moves the robot
     config = workcell_config(
         tmp_path,
         plates=2,
-        run={"heartbeat_s": 0.1, "lease_timeout_s": 0.5},
+        run={"heartbeat_s": heartbeat_s, "lease_timeout_s": 3 * heartbeat_s + 0.2},
         analyzer={"simulator": {"speed_factor": 2.0, "analysis_seconds": 1.0}},
     )
     store = Store.open(config.database.url)
@@ -209,6 +214,8 @@ def test_a_run_whose_lease_is_taken_over_stops_at_the_next_safe_point(tmp_path, 
     with open_run(config, store, plugins=plugins, reporter=Trigger("pick.done", take_over)) as s:
         outcome = s.execute()
     assert outcome.state == "stopped"  # it did not go on driving the workcell
+    moved = [p for p in store.picks_for_run(1) if p.state != "planned"]
+    assert len(moved) == 1  # the pick during which the lease was taken, and no other
     lost = [e.message for e in store.events(1, "run.lease")]
     assert any("was taken over by pid 4243 on host another-host.example" in m for m in lost)
     assert store.get_run(1).lease_pid == 4243  # the intruder keeps it; ours was not released
