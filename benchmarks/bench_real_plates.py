@@ -72,6 +72,7 @@ def score_boxes(result: PlateResult, boxes: np.ndarray, tolerance_px: float = 2.
     """Match a plate's reported colonies to its truth boxes (module docstring)."""
     centres = np.column_stack(((boxes[:, 0] + boxes[:, 2]) / 2, (boxes[:, 1] + boxes[:, 3]) / 2))
     pairs: list[tuple[float, int, int]] = []
+    held = np.zeros(len(result.colonies), int)  # truth centres inside each contour
     for b, colony in enumerate(result.colonies):
         cx, cy = colony.centroid
         contour = np.asarray(colony.contour, np.float32).reshape(-1, 1, 2)
@@ -84,6 +85,7 @@ def score_boxes(result: PlateResult, boxes: np.ndarray, tolerance_px: float = 2.
         near &= (centres[:, 1] >= y0) & (centres[:, 1] <= y1)
         for t in np.flatnonzero(near | holds_centroid):
             inside = cv2.pointPolygonTest(contour, tuple(map(float, centres[t])), True)
+            held[b] += inside >= 0
             if inside >= -tolerance_px or holds_centroid[t]:
                 pairs.append((float(np.hypot(*(centres[t] - (cx, cy)))), b, int(t)))
     pairs.sort()
@@ -95,22 +97,14 @@ def score_boxes(result: PlateResult, boxes: np.ndarray, tolerance_px: float = 2.
             capacity[b] -= 1
             taken[t] = True
             matched += 1
-    offered = [c for c in result.colonies if c.klass == "authentic"]
-    held = [
-        sum(
-            cv2.pointPolygonTest(np.asarray(c.contour, np.float32).reshape(-1, 1, 2), pt, False)
-            >= 0
-            for pt in map(tuple, centres.astype(float))
-        )
-        for c in offered
-    ]
+    offered = held[[c.klass == "authentic" for c in result.colonies]]
     return BoxScore(
         result.counts["colonies_estimate"],
         len(boxes),
         matched,
         len(offered),
-        sum(n >= 2 for n in held),
-        sum(n == 0 for n in held),
+        int(np.sum(offered >= 2)),
+        int(np.sum(offered == 0)),
     )
 
 

@@ -55,11 +55,10 @@ class LeaseKeeper(threading.Thread):
                 return False
             try:
                 self.store.heartbeat(self.run_id, self.owner)
+                return True
             except LeaseLost as exc:
                 self.lost = str(exc)
             except Exception:  # a busy database: try again at the next beat
-                return True
-            else:
                 return True
         self.on_lost(self.lost)
         return False
