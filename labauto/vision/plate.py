@@ -532,6 +532,7 @@ def _objects_by_segmentation(
             min_diameter_mm=params.faint_min_diameter_mm,
             max_diameter_mm=params.faint_max_diameter_mm,
             margin_mm=params.rim_band_mm,
+            agar_colour=background,
         )
         fg = cv2.bitwise_or(fg, faint)
     if params.find_rings:

@@ -9,7 +9,10 @@ noise. Choices made here:
 
 * **Coarse background.** The median of the image over cells of 1.6 mm in a window of 9 cells
   (~15 mm, three times the widest faint colony measured), so a colony cannot pull it to its own
-  colour; linear interpolation back to the pixels.
+  colour; linear interpolation back to the pixels. Under eq. 1's foreground the agar's colour
+  (eq. 1's local background) stands in for the colonies found, so that a crowd of them (a
+  bent chain along a streak) does not pull the median either, and the agar they enclose does
+  not read as departing (AGAR figures unchanged: F1 +0.001).
 * **Smoothed deviation.** The signed B, G, R differences from it are smoothed by a Gaussian of
   ``sigma_mm`` before their Euclidean norm is taken (smoothing the signed differences, not the
   squared ones, averages the noise away instead of accumulating it). The work is done on a copy
@@ -17,6 +20,18 @@ noise. Choices made here:
 * **Threshold from the image.** A pixel is faint foreground when the norm exceeds ``factor``
   times its median over the agar (the agar's own smoothed noise), and at least 3 grey levels.
   Only the agar inside the outer ``margin_mm`` counts (the meniscus is the rim model's business).
+* **The hue as well.** The agar's texture (its thickness, the lighting, reflections) is mostly
+  a change of brightness, along the grey axis of B, G, R; many faint colonies differ from the
+  agar in hue (yellower, less blue) more than in brightness. The deviation's part across the
+  grey axis (each channel minus the mean of the three) is searched a second time, with the
+  same factor over its own median and the same tests, and the bodies of both searches are
+  joined. On the AGAR photographs that part's median is 0.75-0.98 levels against 1.9-2.7 for
+  the whole deviation, and the missed colonies stand out three to four times farther from it:
+  it found 84 bodies, each holding a boxed colony. AGAR reported 1547 -> 1558, matched 1485
+  -> 1501 (F1 0.865 -> 0.872), median count error 11.4 -> 10.8 %; at 7 px/mm F1 0.823 ->
+  0.834, at 4.5 px/mm 0.758 -> 0.768; phone-counts median 2.9 -> 3.4 %, plates over 15 %
+  2 -> 1 (a red print seen through the agar of IMG_2527 is taken for a colony). Factors 3-5
+  gave F1 0.868-0.872.
 * **Bodies.** Components are filled (ring-shaped colonies: dark edge, agar-coloured inside) and
   kept when they look like a colony or a small cluster, not a lighting drift: between
   ``min_diameter_mm`` and ``max_diameter_mm`` as a disc, solidity (area over convex hull) >= 0.9,
@@ -65,6 +80,7 @@ _MIN_ROUNDNESS = 0.6
 _MIN_EDGE = 0.25  # least edge gradient (per work pixel) relative to a body's contrast
 _EDGE_RADII = 1.5  # ... or this over the body's radius (work pixels), if that is less ...
 _LEAST_EDGE = 0.15  # ... but never less than this
+_GREY = np.full((3, 3), 1 / 3, np.float32)  # cv2.transform: each channel to the mean of the three
 _RING = np.ones((5, 5), np.uint8)  # the band round a body's outline where its edge is read
 
 
@@ -80,6 +96,8 @@ def faint_bodies(
     max_diameter_mm: float = 12.0,
     max_overlap: float = 0.2,
     margin_mm: float = 4.0,
+    agar_colour: np.ndarray | None = None,
+    chroma: bool = True,
 ) -> np.ndarray:
     """A mask (uint8, 0 / 255) of the faint bodies to add to eq. 1's ``foreground``.
 
@@ -95,6 +113,11 @@ def faint_bodies(
         Scale of ``image``.
     factor, sigma_mm, min_diameter_mm, max_diameter_mm, max_overlap, margin_mm
         See the module docstring.
+    agar_colour : ndarray, optional
+        HxWx3 BGR uint8: the agar's colour under eq. 1's foreground (its local background);
+        the coarse background is estimated with it in place of the colonies found.
+    chroma : bool
+        Also look for bodies in the deviation's chromatic part (see the module docstring).
     """
     h, w = usable.shape
     empty = np.zeros((h, w), np.uint8)
@@ -110,31 +133,68 @@ def faint_bodies(
     agar = cv2.resize(usable[whole], (sw, sh), interpolation=cv2.INTER_NEAREST)
     fine = cv2.resize(foreground[whole], (sw, sh), interpolation=cv2.INTER_NEAREST)
 
+    seen = img  # what the coarse background is the median of: the agar, not the colonies found
+    if agar_colour is not None:
+        seen = img.copy()
+        under = cv2.resize(agar_colour[whole], (sw, sh), interpolation=cv2.INTER_AREA)
+        cv2.copyTo(under, fine, seen)
     cell = max(round(_CELL_MM * ppm), 1)
-    cells = cv2.resize(img, (max(sw // cell, 1), max(sh // cell, 1)), interpolation=cv2.INTER_AREA)
+    cells = cv2.resize(seen, (max(sw // cell, 1), max(sh // cell, 1)), interpolation=cv2.INTER_AREA)
     window = min(_MEDIAN_CELLS, 2 * ((min(cells.shape[:2]) - 1) // 2) + 1)
     median = cv2.medianBlur(cells, window) if window > 1 else cells
     background = cv2.resize(median, (sw, sh), interpolation=cv2.INTER_LINEAR)
     diff = cv2.GaussianBlur(cv2.subtract(img, background, dtype=cv2.CV_32F), (0, 0), sigma_mm * ppm)
-    norm = cv2.sqrt(cv2.transform(cv2.multiply(diff, diff), np.ones((1, 3), np.float32)))
 
     # the agar farther than margin_mm from its border (a distance transform: a wide erosion's
     # work in one pass)
     depth = cv2.distanceTransform(agar, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     inner = cv2.compare(depth, margin_mm * ppm, cv2.CMP_GT)
+    limits = (
+        factor,
+        math.pi / 4 * (min_diameter_mm * ppm) ** 2,
+        math.pi / 4 * (max_diameter_mm * ppm) ** 2,
+        max_overlap,
+    )
+    kept = _bodies_departing(diff, inner, fine, limits)
+    if chroma:  # the departure across the grey axis: a hue, whatever the brightness does
+        hue = cv2.subtract(diff, cv2.transform(diff, _GREY))
+        kept += _bodies_departing(hue, inner, fine, limits)
+    if not kept:
+        return empty
+    small_mask = np.zeros_like(fine)
+    for outline in kept:  # one by one: outlines of the two passes may overlap
+        cv2.drawContours(small_mask, [outline], -1, 255, cv2.FILLED)
+    mask = cv2.resize(small_mask, (sw * step, sh * step), interpolation=cv2.INTER_LINEAR)
+    empty[whole] = cv2.compare(mask, 127, cv2.CMP_GT)
+    return empty
+
+
+def _bodies_departing(
+    diff: np.ndarray,
+    inner: np.ndarray,
+    fine: np.ndarray,
+    limits: tuple[float, float, float, float],
+) -> list[np.ndarray]:
+    """Outlines of the colony-like bodies where the norm of ``diff`` departs from the agar's.
+
+    ``diff`` is a smoothed signed difference from the coarse background (work pixels, 3
+    channels), ``inner`` the agar whose norm sets the threshold, ``fine`` eq. 1's foreground,
+    ``limits`` the factor, the least and largest area (work pixels) and the largest overlap
+    with ``fine``.
+    """
+    factor, min_area, max_area, max_overlap = limits
+    norm = cv2.sqrt(cv2.transform(cv2.multiply(diff, diff), np.ones((1, 3), np.float32)))
     samples = norm[inner > 0]
     if samples.size == 0:
-        return empty
+        return []
     t = max(_FLOOR, factor * float(np.median(samples)))
     faint = cv2.bitwise_and(cv2.compare(norm, t, cv2.CMP_GT), inner)
     outlines, _ = cv2.findContours(faint, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    min_area = math.pi / 4 * (min_diameter_mm * ppm) ** 2
-    max_area = math.pi / 4 * (max_diameter_mm * ppm) ** 2
     kept = []
     for outline in outlines:
         if not 0.5 * min_area <= cv2.contourArea(outline) <= 2.0 * max_area:
             continue  # far outside the size range: no need to fill it
-        x, y, bw, bh = _padded_rect(outline, 2, img.shape[:2])
+        x, y, bw, bh = _padded_rect(outline, 2, faint.shape)
         body = np.zeros((bh, bw), np.uint8)
         cv2.drawContours(body, [outline], -1, 255, cv2.FILLED, offset=(-x, -y))
         area = cv2.countNonZero(body)
@@ -156,13 +216,7 @@ def faint_bodies(
         if sharpness < least * contrast:
             continue  # no edge: a drift of the agar's colour, not a colony
         kept.append(outline)
-    if not kept:
-        return empty
-    small_mask = np.zeros_like(faint)
-    cv2.drawContours(small_mask, kept, -1, 255, cv2.FILLED)
-    mask = cv2.resize(small_mask, (sw * step, sh * step), interpolation=cv2.INTER_LINEAR)
-    empty[whole] = cv2.compare(mask, 127, cv2.CMP_GT)
-    return empty
+    return kept
 
 
 def _edge_in(diff: np.ndarray, rect: tuple[int, int, int, int]) -> np.ndarray:

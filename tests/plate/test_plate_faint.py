@@ -49,3 +49,41 @@ def test_a_drift_of_the_agar_is_no_colony() -> None:
     # as deep, but fading with sigma 1 mm (measured: from 0.5 mm on, nothing is found): a
     # change of the agar, not a colony's edge
     assert not _found(_agar_with_soft_disc(4.0, 1.0, 8.0))
+
+
+def _textured_agar_with_hued_disc(delta_bgr: tuple[float, float, float]) -> np.ndarray:
+    """600 px of agar (10 px/mm) whose brightness wanders by 4 grey levels (std) over ~0.6 mm
+    blotches, as thickness and lighting do, with a 5 mm disc departing by ``delta_bgr``."""
+    rng = np.random.default_rng(1)
+    blotches = cv2.GaussianBlur(rng.normal(0.0, 1.0, (600, 600)).astype(np.float32), (0, 0), 6.0)
+    blotches *= 4.0 / blotches.std()
+    disc = np.zeros((600, 600), np.float32)
+    cv2.circle(disc, (300, 300), 25, 1.0, -1, cv2.LINE_AA)
+    disc = cv2.GaussianBlur(disc, (0, 0), 2.0)
+    img = np.empty((600, 600, 3), np.float32)
+    img[:] = AGAR_BGR
+    img += blotches[..., None] + disc[..., None] * np.asarray(delta_bgr, np.float32)
+    img += rng.normal(0.0, 2.0, img.shape)
+    return np.clip(img + 0.5, 0, 255).astype(np.uint8)
+
+
+def test_a_colony_departing_in_hue_only_is_found_through_the_agars_texture() -> None:
+    # a yellower disc (10 levels less blue, 5 more red: its brightness changes by 1.3 levels),
+    # as the small and large faint colonies of AGAR plates 11924 and 12033; the agar's
+    # brightness texture lifts the full deviation's threshold above it, not the hue's
+    usable = np.zeros((600, 600), np.uint8)
+    cv2.circle(usable, (300, 300), 290, 255, -1)
+    none = np.zeros_like(usable)
+
+    def found(img: np.ndarray, chroma: bool) -> np.ndarray:
+        return faint_bodies(img, usable, none, PX_PER_MM, margin_mm=1.0, chroma=chroma)
+
+    img = _textured_agar_with_hued_disc((-10.0, 1.0, 5.0))
+    assert not found(img, chroma=False).any()
+    body = found(img, chroma=True) > 0
+    disc = np.zeros_like(usable)
+    cv2.circle(disc, (300, 300), 25, 255, -1)
+    overlap = np.count_nonzero(body & (disc > 0))
+    assert overlap >= 0.8 * np.count_nonzero(disc) and np.count_nonzero(body) <= 1.4 * overlap
+    # the texture alone is no colony, in either part of the deviation
+    assert not found(_textured_agar_with_hued_disc((0.0, 0.0, 0.0)), chroma=True).any()
