@@ -422,7 +422,11 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     stroke_shaped = bodies.stroke.copy()
     ppm = float(params.px_per_mm or 0.0)
     if params.reject_ink:
-        ink = ink_bodies(roi, background, bodies, ~bodies.stroke, ppm)
+        shaped = None  # single colonies' shape, for a coarse frame's blurred print
+        if copy.factor > 1.0:
+            shaped = des_shape[bodies.index] & (bodies.concavity < params.max_concavity)
+            shaped &= bodies.elongation <= params.max_authentic_elongation
+        ink = ink_bodies(roi, background, bodies, ~bodies.stroke, ppm, shaped)
         if ink.any():
             rejected["ink"] = int(ink.sum())
             bodies.stroke |= ink
