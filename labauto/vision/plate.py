@@ -59,8 +59,10 @@ Pipeline and the choices it makes where the paper leaves room:
    (the dome shading of one species); a pixel farther than ``mix_residual`` grey levels (Euclidean,
    BGR) from the fit is an outlier, and the colony is mixed when the fraction of outliers
    (``mix_score``) is at least ``mix_fraction``: a sector or speckles of a second species of
-   another colour or brightness. The rule is absolute, not relative to the plate's other colonies,
-   so a plate of only mixed colonies is still read right.
+   another colour or brightness. A DES whose outliers hold one round spot of 0.4 mm or more
+   (a small colony sitting on a large one, too small a share for the fraction) is mixed too
+   (:func:`labauto.vision.plate_bodies.mix_scores`). The rule is absolute, not relative to the
+   plate's other colonies, so a plate of only mixed colonies is still read right.
 5. **Merged count.** Peaks of the merged body's distance transform (one per plateau), kept
    greedily from the highest; a peak is a new colony when the distance transform along the
    straight segment to every peak already kept dips below ``valley_ratio`` times the lower peak
@@ -463,7 +465,7 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     )
     des &= counts == 1
     counts = np.where(inked, counts, pair_counts(bodies, counts, des, params.pair_elongation))
-    mix = mix_scores(roi, bodies, des, params)
+    mix, spotted = mix_scores(roi, bodies, des, params)
 
     colonies: list[Colony] = []
     for b, k in enumerate(bodies.index.tolist()):
@@ -471,7 +473,7 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
             continue
         klass = "merged"
         if des[b]:
-            klass = "mixed" if mix[b] >= params.mix_fraction else "authentic"
+            klass = "mixed" if mix[b] >= params.mix_fraction or spotted[b] else "authentic"
         centroid = copy.to_original(np.add(centroids[k], (x0, y0)))
         colonies.append(
             Colony(

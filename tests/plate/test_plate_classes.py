@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
+from labauto.vision import plate_bodies
 from labauto.vision.plate import PlateParams, analyze_plate
 
 AGAR_BGR = (120, 180, 205)
@@ -179,3 +180,21 @@ def test_a_printed_character_touching_a_colony_is_not_counted(
     assert body().estimated_count == 1  # the character's pixels left out of the count
     monkeypatch.setattr("labauto.vision.plate_ink.INK_SHARE", 2.0)  # never left out
     assert body().estimated_count >= 8
+
+
+@pytest.mark.parametrize("spot_mm", [plate_bodies.SPOT_MM, 0.0])
+def test_a_small_colony_on_a_large_one_is_mixed(
+    monkeypatch: pytest.MonkeyPatch, spot_mm: float
+) -> None:
+    # a pale colony 0.8 mm across near the edge of one 8 mm across: 1 % of it, far below the
+    # outlier fraction, yet a second species in the pick; a pale arc (a ring of the colony's
+    # own texture) as large in area is no second colony
+    monkeypatch.setattr(plate_bodies, "SPOT_MM", spot_mm)
+    img = _agar_with([(150.0, 300.0, 40.0), (420.0, 300.0, 40.0)])
+    pale = (150, 200, 230)
+    cv2.circle(img, (175, 290), 4, pale, -1, cv2.LINE_AA)
+    cv2.ellipse(img, (420, 300), (28, 28), 0, 200, 300, pale, 2, cv2.LINE_AA)
+    spotted, ringed = _analyse(img)
+    assert ringed.klass == "authentic"
+    assert spotted.klass == ("mixed" if spot_mm > 0 else "authentic")
+    assert spotted.mix_score < 0.06  # the fraction alone would offer it

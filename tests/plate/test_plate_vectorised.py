@@ -186,7 +186,7 @@ def test_vectorised_mix_scores_and_merged_counts_equal_per_body(
     for roi, contours, fg, des_shape, bodies, params in stages:
         everyone = ~bodies.stroke
         round_outline = des_shape[bodies.index]
-        scores = plate_bodies.mix_scores(roi, bodies, everyone, params)
+        scores, _ = plate_bodies.mix_scores(roi, bodies, everyone, params)
         counts = plate_bodies.merged_counts(
             bodies, everyone, params.valley_ratio, least_peak, round_outline
         )
