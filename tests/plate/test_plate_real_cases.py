@@ -80,8 +80,8 @@ def test_large_translucent_colonies_come_from_the_faint_pass() -> None:
             score = score_plate(truth, analyze_plate(img, params).colonies)
             assert score.false_positives == 0
             found[faint] += score.found
-    # measured: 7 against 0 of 60. Before the generator drew a translucent colony's shading
-    # and highlight at its contrast too, they departed from the agar by ~25 levels, eq. 1
-    # found 51 of these and the faint pass 53: the large faint colonies of the AGAR photos,
-    # which these now resemble, are still mostly missed (plates 510, 11761, 11924, 12031)
-    assert found[True] >= found[False] + 5
+    # measured: 46 against 0 of 60, of which the search in the hue (the deviation across the
+    # grey axis) finds 39: searching the full deviation alone found 7. Before the generator
+    # drew a translucent colony's shading and highlight at its contrast too, they departed
+    # from the agar by ~25 levels and eq. 1 found 51 of these
+    assert found[True] >= found[False] + 35
