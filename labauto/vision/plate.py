@@ -104,6 +104,7 @@ from labauto.vision.plate_background import (
     hysteresis,
     local_background,
     open_thin_lines,
+    with_hued_bodies,
     with_radial_rim,
 )
 from labauto.vision.plate_bodies import (
@@ -548,7 +549,7 @@ def _objects_by_segmentation(
         # colonies touching them come apart from them
         k = 2 * math.floor(params.open_mm * float(params.px_per_mm or 0.0) / 2) + 1  # odd
         if k >= 3:
-            fg = open_thin_lines(fg, k)
+            fg = with_hued_bodies(fg, open_thin_lines(fg, k), roi, background)
     # outer boundaries of every body, also of bodies lying in another's hole (a colony inside
     # the meniscus ring): RETR_CCOMP puts all outer boundaries at the top level
     traced, hierarchy = cv2.findContours(fg, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)

@@ -265,3 +265,60 @@ def open_thin_lines(fg: np.ndarray, size: int) -> np.ndarray:
     if fragment.any():
         opened[fragment[labels]] = 0
     return opened
+
+
+_HUE_SHARE = 0.5  # an erased body is kept when its departure is at least this much hue
+
+
+def with_hued_bodies(
+    fg: np.ndarray, opened: np.ndarray, image: np.ndarray, background: np.ndarray
+) -> np.ndarray:
+    """``opened`` with the bodies of ``fg`` that the opening erased whole and whose colour
+    departs from the agar mostly in hue, put back.
+
+    The opening (:func:`open_thin_lines`) also erases colonies narrower than its disc (under
+    ~0.8 mm), and a small colony whose core alone passes eq. 1 is narrower still. Lines and
+    printed dots are erased with them; most are grey or black: they take a like share of
+    every channel away, while a pigmented colony shifts the agar's hue. The mean departure
+    (B, G, R) of an erased body from the agar's colour behind it is split into its part along
+    the grey axis and the rest (each channel minus the mean of the three); the body comes back
+    when the rest is at least ``_HUE_SHARE`` of the whole. A body erased whole touches nothing
+    the opening kept, so putting it back joins nothing; the size and shape tests then judge it
+    as any other body.
+
+    Measured on the AGAR photographs: matched 1501 -> 1539, reported 1558 -> 1599 (on nine
+    plates; 11761 +11, 11924 +9, 12031 +6, 12028 +4), F1 0.872 -> 0.883, plates over 15 %
+    count error 16 -> 15; at 7 px/mm F1 0.848 -> 0.859, at 4.5 px/mm 0.805 -> 0.816;
+    phone-counts unchanged. Hue shares of 0.3 and 0.7 gave F1 0.881 and 0.882. Putting back
+    every erased compact body instead (no colour test) found 80 more but let through hundreds
+    of printed dots (precision 0.69). Limit: a small grey or white colony erased by the
+    opening stays erased.
+    """
+    removed = cv2.compare(fg, opened, cv2.CMP_GT)
+    points = cv2.findNonZero(removed)
+    if points is None:
+        return opened
+    n, labels = cv2.connectedComponents(fg, connectivity=8)
+    survived = np.zeros(n, bool)
+    survived[labels[opened > 0]] = True
+    x, y = points.reshape(-1, 2).T
+    label = labels[y, x]
+    erased = ~survived[label]
+    if not erased.any():
+        return opened
+    x, y, label = x[erased], y[erased], label[erased]
+    departure = image[y, x].astype(np.float64) - background[y, x].astype(np.float64)
+    pixels = np.bincount(label, minlength=n).astype(np.float64)
+    mean = (
+        np.stack([np.bincount(label, departure[:, c], minlength=n) for c in range(3)], axis=1)
+        / np.maximum(pixels, 1.0)[:, None]
+    )
+    hue = mean - mean.mean(axis=1, keepdims=True)
+    hued = np.linalg.norm(hue, axis=1) >= _HUE_SHARE * np.linalg.norm(mean, axis=1)
+    hued &= pixels > 0
+    keep = hued[label]
+    if not keep.any():
+        return opened
+    out = opened.copy()
+    out[y[keep], x[keep]] = 255
+    return out

@@ -9,6 +9,7 @@ from labauto.vision.plate_background import (
     deviation,
     local_background,
     open_thin_lines,
+    with_hued_bodies,
     with_radial_rim,
 )
 
@@ -51,3 +52,26 @@ def test_the_meniscus_ring_goes_into_the_background() -> None:
     assert ring_before > 3000  # the cell background does not follow a 6 px ring
     assert dev[200, 376] < 300 and dev[24, 200] < 300  # the radial profile does, all round
     assert dev[60, 200] > 3000  # the colony still stands out
+
+
+def test_small_pigmented_colonies_the_opening_erased_come_back() -> None:
+    # 0.6 mm dots at 10 px/mm, narrower than the 0.75 mm opening: yellow ones (a hue: 40
+    # levels less blue) are colonies, grey ones (a like share of every channel) printed dots
+    agar = (150, 190, 205)
+    img = np.zeros((600, 600, 3), np.uint8)
+    img[:] = agar
+    fg = np.zeros((600, 600), np.uint8)
+    for i in range(5):
+        cv2.circle(img, (150 + 60 * i, 200), 3, (110, 185, 210), -1)  # yellow
+        cv2.circle(img, (150 + 60 * i, 400), 3, (100, 140, 155), -1)  # grey
+        cv2.circle(fg, (150 + 60 * i, 200), 3, 255, -1)
+        cv2.circle(fg, (150 + 60 * i, 400), 3, 255, -1)
+    cv2.circle(fg, (300, 300), 20, 255, -1)  # a colony the opening keeps
+    opened = open_thin_lines(fg, 7)
+    assert cv2.connectedComponents(opened)[0] - 1 == 1
+    background = np.empty_like(img)
+    background[:] = agar
+    kept = with_hued_bodies(fg, opened, img, background)
+    assert cv2.connectedComponents(kept)[0] - 1 == 6
+    assert kept[200, 150:391:60].all() and not kept[400, 150:391:60].any()
+    np.testing.assert_array_equal(kept[fg == 0], 0)  # nothing beyond the bodies

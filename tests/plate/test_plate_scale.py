@@ -54,9 +54,9 @@ def test_same_plate_at_another_camera_scale_reads_the_same(factor: float) -> Non
 def test_px_per_mm_from_a_calibration_overrides_the_dish() -> None:
     img, _ = generate_plate(7, agar="clear")
     found = analyze_plate(img)
-    # a calibration saying 100 px/mm makes every colony (~20 px) smaller than 0.3 mm: none is
-    # a colony any more (the opening of thin lines or the dust limit takes them)
-    tiny = analyze_plate(img, PlateParams(px_per_mm=100.0))
+    # a calibration saying 200 px/mm makes every colony (at most 47 px across) smaller than
+    # 0.25 mm: none is a colony any more (below the dust limit of 0.3 mm)
+    tiny = analyze_plate(img, PlateParams(px_per_mm=200.0))
     assert len(found.colonies) >= 25 and tiny.colonies == []
 
 
