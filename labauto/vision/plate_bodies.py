@@ -221,15 +221,15 @@ def mix_scores(
 
     Also returned: whether a body's outliers hold a round spot (one connected piece at least
     ``SPOT_MM`` across both ways, filling ``SPOT_ROUNDNESS`` of the ellipse inscribed in its
-    bounding box):
-    a small colony sitting on a large one, too small a share of it for the score. Measured on
-    the colonies offered for picking on the AGAR photographs (their outliers at the photo's
-    own resolution): the three that held a small boxed colony on a large one had spots 0.61-
-    0.84 mm across filling 0.92-0.96 of their enclosing circle; the single colonies' largest
-    outlier pieces, a textured centre or the arcs of concentric rings, filled at most 0.69.
-    In the analysis (every second pixel at 12 px/mm), the spot rule takes 3 of the 7 offered
-    colonies holding two boxed ones out of the picking list, and 12 single colonies with them
-    (1.4 % of 886); 0.5 mm takes the same, roundness 0.8 only 2 and 7 singles.
+    bounding box): a small colony sitting on a large one, too small a share of it for the
+    score. Measured on the colonies offered for picking on the AGAR photographs (their
+    outliers at the photo's own resolution): the three that held a small boxed colony on a
+    large one had spots 0.61-0.84 mm across filling 0.92-0.96 of their enclosing circle; the
+    single colonies' largest outlier pieces, a textured centre or the arcs of concentric
+    rings, filled at most 0.69. In the analysis (every second pixel at 12 px/mm), the spot
+    rule takes 3 of the 7 offered colonies holding two boxed ones out of the picking list,
+    and 12 single colonies with them (1.4 % of 886); 0.5 mm takes the same, roundness 0.8
+    only 2 and 7 singles.
     """
     k = len(bodies.index)
     score = np.zeros(k)

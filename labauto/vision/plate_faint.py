@@ -117,7 +117,8 @@ def faint_bodies(
         HxWx3 BGR uint8: the agar's colour under eq. 1's foreground (its local background);
         the coarse background is estimated with it in place of the colonies found.
     chroma : bool
-        Also look for bodies in the deviation's chromatic part (see the module docstring).
+        Also search the deviation's part across the grey axis, its hue ("The hue as well" in
+        the module docstring).
     """
     h, w = usable.shape
     empty = np.zeros((h, w), np.uint8)

@@ -41,9 +41,9 @@ of dark grey colonies, whose pairs this rule would drop). Measured on the AGAR p
 resampled to 4.5 px/mm: 96 such bodies held no boxed colony (204 colonies counted) and 4 held
 one; reported 1716 -> 1526, matched 1383 -> 1374, F1 0.768 -> 0.805, median count error 17.6
 -> 16.7 %; at 7 px/mm reported 1602 -> 1529, matched 1454 -> 1448, F1 0.834 -> 0.848;
-phone-counts unchanged at both scales. At the native
-scale the rule would drop 5 matched colonies for 10 false ones, and frames as fine as 8 px/mm
-resolve the dots, so it is kept to coarse frames.
+phone-counts unchanged at both scales. At the native scale the rule would drop 5 matched
+colonies for 10 false ones, and frames as fine as 8 px/mm resolve the dots, so it is kept to
+coarse frames.
 
 Limit: a dark grey or blue colony (some chromogenic media) that is small or stroke-shaped
 reads as ink; ``PlateParams.reject_ink`` turns the test off for such plates.
