@@ -424,17 +424,16 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     bodies = measure_bodies(contours, fg, des_shape, params, rejected)
     stroke_shaped = bodies.stroke.copy()
     ppm = float(params.px_per_mm or 0.0)
+    # a single colony's shape: a DES outline, no waist, round
+    single = des_shape[bodies.index] & (bodies.concavity < params.max_concavity)
+    single &= bodies.elongation <= params.max_authentic_elongation
     if params.reject_ink:
-        shaped = None  # single colonies' shape, for a coarse frame's blurred print
-        if copy.factor > 1.0:
-            shaped = des_shape[bodies.index] & (bodies.concavity < params.max_concavity)
-            shaped &= bodies.elongation <= params.max_authentic_elongation
-        ink = ink_bodies(roi, background, bodies, ~bodies.stroke, ppm, shaped)
+        coarse = copy.factor > 1.0  # a resampled webcam frame: print's dots have merged
+        ink = ink_bodies(roi, background, bodies, ~bodies.stroke, ppm, single if coarse else None)
         if ink.any():
             rejected["ink"] = int(ink.sum())
             bodies.stroke |= ink
-    des = des_shape[bodies.index] & (bodies.concavity < params.max_concavity) & ~bodies.stroke
-    des &= bodies.elongation <= params.max_authentic_elongation
+    des = single & ~bodies.stroke
     # the plate's yardstick: the inscribed radius of its single colonies
     single_r_in = float(np.median(bodies.r_in[des])) if des.sum() >= MIN_SINGLES else 0.0
     if params.chain_ratio > 0 and single_r_in > 0:  # as wide as a colony: a chain of them

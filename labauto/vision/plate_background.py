@@ -315,7 +315,6 @@ def with_hued_bodies(
     )
     hue = mean - mean.mean(axis=1, keepdims=True)
     hued = np.linalg.norm(hue, axis=1) >= _HUE_SHARE * np.linalg.norm(mean, axis=1)
-    hued &= pixels > 0
     keep = hued[label]
     if not keep.any():
         return opened
