@@ -192,7 +192,7 @@ def test_status_in_both_report_modes(robot: GrblRobot) -> None:
     robot.execute("G10 L2 P1 X-5 Y-6 Z-1")  # a work offset, so WPos differs from MPos
     robot.execute("$10=0")  # report WPos; GRBL sends WCO only every 10-30 reports
     try:
-        reports = [robot.status() for _ in range(12)]
+        reports = [poll_status(robot) for _ in range(12)]
     finally:
         robot.execute("$10=1")
         robot.execute("G10 L2 P1 X0 Y0 Z0")
@@ -200,7 +200,7 @@ def test_status_in_both_report_modes(robot: GrblRobot) -> None:
     with_offset = [r for r in reports if "WCO:" in r.raw]
     assert 1 <= len(with_offset) <= 2  # the firmware really leaves WCO out of most reports
     assert all(r.position == pytest.approx((-12.0, -8.0, -3.0)) for r in reports)
-    machine = robot.status()
+    machine = poll_status(robot)
     assert "MPos:-12.000,-8.000,-3.000" in machine.raw and machine.work_position is None
 
 
