@@ -29,6 +29,8 @@ import math
 import cv2
 import numpy as np
 
+from labauto.vision.median import median
+
 _SQUARES = (np.arange(256, dtype=np.float32) ** 2).reshape(1, 256)
 _ONES_3 = np.ones((1, 3), np.float32)  # cv2.transform: sum of the three channels
 _WIDE_MEDIAN_CELLS = 31  # ~25 mm at 0.8 mm cells: wider than the largest colonies
@@ -123,7 +125,7 @@ def adaptive_threshold(
     samples = dev[::step, ::step][usable[::step, ::step] > 0]
     if samples.size == 0:
         return float(floor)
-    return float(max(floor, noise_factor * float(np.median(samples))))
+    return float(max(floor, noise_factor * median(samples)))
 
 
 def hysteresis(dev: np.ndarray, usable: np.ndarray, high: float, low: float) -> np.ndarray:
@@ -254,16 +256,23 @@ def open_thin_lines(fg: np.ndarray, size: int) -> np.ndarray:
     removed = cv2.compare(fg, opened, cv2.CMP_GT)
     if not removed.any():
         return opened
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(opened, connectivity=8)
+    # labels without statistics, the areas counted at the pieces' own pixels: several times
+    # quicker than connectedComponentsWithStats over the whole image
+    n, labels = cv2.connectedComponents(opened, connectivity=8)
     if n <= 1 or n > np.iinfo(np.uint16).max:
         return opened
+    xs, ys = cv2.findNonZero(opened).reshape(-1, 2).T
+    piece = labels[ys, xs]
+    area = np.bincount(piece, minlength=n)
     # the piece within ``size`` px of every removed pixel (16-bit dilation of the labels)
     around = cv2.dilate(labels.astype(np.uint16), disc)
-    near = np.bincount(around[removed > 0], minlength=n)
-    fragment = near > _FRAGMENT_RATIO * stats[:, cv2.CC_STAT_AREA]
+    rx, ry = cv2.findNonZero(removed).reshape(-1, 2).T
+    near = np.bincount(around[ry, rx], minlength=n)
+    fragment = near > _FRAGMENT_RATIO * area
     fragment[0] = False
     if fragment.any():
-        opened[fragment[labels]] = 0
+        dropped = fragment[piece]
+        opened[ys[dropped], xs[dropped]] = 0
     return opened
 
 
@@ -300,7 +309,10 @@ def with_hued_bodies(
         return opened
     n, labels = cv2.connectedComponents(fg, connectivity=8)
     survived = np.zeros(n, bool)
-    survived[labels[opened > 0]] = True
+    kept = cv2.findNonZero(opened)
+    if kept is not None:
+        kx, ky = kept.reshape(-1, 2).T
+        survived[labels[ky, kx]] = True
     x, y = points.reshape(-1, 2).T
     label = labels[y, x]
     erased = ~survived[label]

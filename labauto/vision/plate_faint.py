@@ -72,6 +72,8 @@ import math
 import cv2
 import numpy as np
 
+from labauto.vision.median import median
+
 _CELL_MM = 1.6  # cell of the coarse background
 _MEDIAN_CELLS = 9  # its median window, in cells (~15 mm)
 _WORK_PX_PER_MM = 4.0  # resolution of the smoothed deviation
@@ -189,7 +191,7 @@ def _bodies_departing(
     samples = norm[inner > 0]
     if samples.size == 0:
         return []
-    t = max(_FLOOR, factor * float(np.median(samples)))
+    t = max(_FLOOR, factor * median(samples))
     faint = cv2.bitwise_and(cv2.compare(norm, t, cv2.CMP_GT), inner)
     outlines, _ = cv2.findContours(faint, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     kept = []

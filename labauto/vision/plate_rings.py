@@ -51,6 +51,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from labauto.vision.median import median
+
 _WORK_PX_PER_MM = 4.0  # resolution of the circle search
 _SIGMA_PX = 1.0  # smoothing, work pixels
 _REPEAT = 0.05  # a circle overlapping an accepted one by more than this is the same ring
@@ -155,7 +157,7 @@ def _stands_out(grey: np.ndarray, agar: np.ndarray, circles: np.ndarray) -> np.n
     gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
     gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
     on_agar = cv2.magnitude(gx, gy)[agar > 0]
-    texture = float(np.median(on_agar)) if on_agar.size else 0.0
+    texture = median(on_agar) if on_agar.size else 0.0
     h, w = grey.shape
     theta = np.linspace(0.0, 2 * np.pi, 48, endpoint=False)
     cos, sin = np.cos(theta)[None, :, None], np.sin(theta)[None, :, None]
