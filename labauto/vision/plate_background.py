@@ -204,9 +204,12 @@ def with_radial_rim(
     # one 3-byte item per pixel: gathering and scattering whole pixels is ~4x faster so
     pixels = out.reshape(-1).view(_PIXEL)
     idx = ys.astype(np.intp) * w + xs
-    here = np.take(pixels, idx).view(np.uint8).reshape(-1, 3).astype(np.float32)
-    here += (lookup - here) * weight[:, None]
-    np.put(pixels, idx, cv2.convertScaleAbs(here.reshape(-1, 1, 3)).reshape(-1).view(_PIXEL))
+    here = np.take(pixels, idx).view(np.uint8).reshape(1, -1).astype(np.float32)
+    # here + (lookup - here) * weight over flat rows of B, G, R values (numpy's broadcast of
+    # the weight over rows of three is ~4x slower)
+    step = cv2.subtract(lookup.reshape(1, -1), here)
+    here = cv2.add(here, cv2.multiply(step, np.repeat(weight, 3).reshape(1, -1)))
+    np.put(pixels, idx, cv2.convertScaleAbs(here).reshape(-1).view(_PIXEL))
     return out
 
 
