@@ -61,16 +61,63 @@ _GAP = np.ones((5, 5), np.uint8)  # the disc keeps 2 px away from its neighbours
 _MIN_EDGE = 2.0  # least edge strength of a ring, in units of the agar's texture gradient
 
 
-def ring_bodies(
+def ring_circles(
     image: np.ndarray,
     usable: np.ndarray,
-    foreground: np.ndarray,
     px_per_mm: float,
     *,
     canny_high: float = 45.0,
     perfectness: float = 0.8,
     min_diameter_mm: float = 2.0,
     max_diameter_mm: float = 12.0,
+) -> np.ndarray:
+    """The circles ``(x, y, r)`` (image pixels, strongest first) whose edge stands out.
+
+    The circle search of :func:`ring_bodies`, on the image alone (no foreground): plate analysis
+    runs it in a thread of its own beside eq. 1's segmentation.
+
+    Parameters
+    ----------
+    image : ndarray
+        HxWx3 BGR uint8 (the dish's bounding box, as analysed).
+    usable : ndarray
+        HxW uint8 mask of the usable agar (the texture's reference).
+    px_per_mm : float
+        Scale of ``image``.
+    canny_high, perfectness, min_diameter_mm, max_diameter_mm
+        See the module docstring.
+    """
+    none = np.zeros((0, 3), np.float64)
+    scale = min(_WORK_PX_PER_MM / px_per_mm, 1.0)
+    grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)  # then resampled: a third of the work
+    small = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    if min(small.shape[:2]) < 8:
+        return none
+    grey = cv2.GaussianBlur(small, (0, 0), _SIGMA_PX)
+    ppm = px_per_mm * scale
+    circles = cv2.HoughCircles(
+        grey,
+        cv2.HOUGH_GRADIENT_ALT,
+        dp=1.5,
+        minDist=min_diameter_mm * ppm,
+        param1=canny_high,
+        param2=perfectness,
+        minRadius=max(round(min_diameter_mm * ppm / 2), 3),
+        maxRadius=max(round(max_diameter_mm * ppm / 2), 4),
+    )
+    if circles is None:
+        return none
+    agar = cv2.resize(usable, (grey.shape[1], grey.shape[0]), interpolation=cv2.INTER_NEAREST)
+    return circles[0][_stands_out(grey, agar, circles[0])] / scale
+
+
+def ring_bodies(
+    image: np.ndarray,
+    usable: np.ndarray,
+    foreground: np.ndarray,
+    px_per_mm: float,
+    *,
+    circles: np.ndarray | None = None,
     max_found: float = 0.2,
     margin_mm: float = 1.0,
 ) -> np.ndarray:
@@ -86,35 +133,18 @@ def ring_bodies(
         HxW uint8 mask of eq. 1's (and the faint pass's) foreground; not changed.
     px_per_mm : float
         Scale of ``image``.
-    canny_high, perfectness, min_diameter_mm, max_diameter_mm, max_found, margin_mm
+    circles : ndarray, optional
+        :func:`ring_circles` of the image, when taken already (with its default search).
+    max_found, margin_mm
         See the module docstring.
     """
     out = foreground.copy()
-    scale = min(_WORK_PX_PER_MM / px_per_mm, 1.0)
-    grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)  # then resampled: a third of the work
-    small = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-    if min(small.shape[:2]) < 8:
-        return out
-    grey = cv2.GaussianBlur(small, (0, 0), _SIGMA_PX)
-    ppm = px_per_mm * scale
-    circles = cv2.HoughCircles(
-        grey,
-        cv2.HOUGH_GRADIENT_ALT,
-        dp=1.5,
-        minDist=min_diameter_mm * ppm,
-        param1=canny_high,
-        param2=perfectness,
-        minRadius=max(round(min_diameter_mm * ppm / 2), 3),
-        maxRadius=max(round(max_diameter_mm * ppm / 2), 4),
-    )
     if circles is None:
-        return out
-    agar = cv2.resize(usable, (grey.shape[1], grey.shape[0]), interpolation=cv2.INTER_NEAREST)
-    circles = circles[0][_stands_out(grey, agar, circles[0])]
+        circles = ring_circles(image, usable, px_per_mm)
     h, w = usable.shape
     margin = margin_mm * px_per_mm
     accepted = np.zeros((h, w), np.uint8)
-    for x, y, r in (circles / scale).tolist():
+    for x, y, r in circles.tolist():
         cx, cy, radius = round(x), round(y), round(r)
         reach = round(r + margin) + 1  # the disc and its margin; a neighbour's reach beyond
         x0, y0, x1, y1 = cx - 2 * reach, cy - 2 * reach, cx + 2 * reach + 1, cy + 2 * reach + 1
