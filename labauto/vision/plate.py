@@ -105,6 +105,7 @@ from labauto.vision.plate_background import (
     hysteresis,
     local_background,
     open_thin_lines,
+    rim_profile,
     with_hued_bodies,
     with_radial_rim,
 )
@@ -339,16 +340,30 @@ def _usable_area(
 # Segmentation (eq. 1 with a local background)
 
 
+def _rim_band_px(params: PlateParams) -> float:
+    """Width of the outer band that follows the dish's radial profile (working pixels)."""
+    return params.rim_band_mm * float(params.px_per_mm or 1.0)
+
+
 def _background(
-    roi: np.ndarray, usable: np.ndarray, params: PlateParams, rim: Circle | None = None
+    roi: np.ndarray,
+    usable: np.ndarray,
+    params: PlateParams,
+    rim: Circle | None = None,
+    profile: Future | None = None,
 ) -> np.ndarray:
-    """The agar's local colour (:func:`labauto.vision.plate_background.local_background`)."""
+    """The agar's local colour (:func:`labauto.vision.plate_background.local_background`).
+
+    ``profile`` is the rim's radial profile (:func:`rim_profile`) started beside, if it was.
+    """
     cell = int(params.background_scale or 1)
     bg = local_background(roi, usable, cell, params.color_threshold)
-    if rim is not None and params.rim_band_mm > 0:
-        band = params.rim_band_mm * float(params.px_per_mm or 1.0)
-        bg = with_radial_rim(roi, bg, rim, band)
-    return bg
+    if rim is None or params.rim_band_mm <= 0:
+        return bg
+    if profile is None:
+        return with_radial_rim(roi, bg, rim, _rim_band_px(params))
+    found = profile.result()
+    return bg if found is None else with_radial_rim(roi, bg, rim, _rim_band_px(params), found)
 
 
 def _gradients(dev: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -412,10 +427,18 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
             rim = (rim[0] + PAD, rim[1] + PAD, rim[2])
     stage_done("dish")
 
-    circles = None
+    # what needs only the image runs in a thread beside eq. 1's background, threshold and faint
+    # pass (OpenCV lets go of the GIL; a pool per call is safe after a fork): the rim's radial
+    # profile, then the ring colonies' circle search (cv2.HoughCircles, ~5 ms per 1.3-Mpixel
+    # plate). The results are the same as in sequence.
+    side = ThreadPoolExecutor(max_workers=1, thread_name_prefix="labauto-plate")
+    profile = circles = None
+    if rim is not None and params.rim_band_mm > 0:
+        profile = side.submit(rim_profile, roi, rim, _rim_band_px(params))
     if params.method != "detector" and params.find_rings:
-        circles = _beside(ring_circles, roi, usable, float(params.px_per_mm or 1.0))
-    background = _background(roi, usable, params, rim)
+        circles = side.submit(ring_circles, roi, usable, float(params.px_per_mm or 1.0))
+    side.shutdown(wait=False)  # the thread ends with its tasks
+    background = _background(roi, usable, params, rim, profile)
     if params.method == "detector":
         objects = _objects_by_detector(roi, usable, params)
     else:
@@ -525,19 +548,6 @@ def _at_rim(usable: np.ndarray, contours: list[np.ndarray]) -> np.ndarray:
     return np.logical_or.reduceat(inner[points[:, 1], points[:, 0]] == 0, starts)
 
 
-def _beside(function: Any, *args: Any) -> Future:
-    """``function(*args)`` started in a thread of its own (a pool per call: safe after a fork).
-
-    The ring colonies' circle search (``cv2.HoughCircles``, ~5 ms per 1.3-Mpixel plate) needs
-    only the image, and OpenCV lets go of the GIL: it runs while eq. 1's background, threshold
-    and faint pass take the main thread. The result is the same as in sequence.
-    """
-    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="labauto-plate")
-    future = pool.submit(function, *args)
-    pool.shutdown(wait=False)  # the thread ends with its one task
-    return future
-
-
 def _objects_by_segmentation(
     roi: np.ndarray,
     usable: np.ndarray,
@@ -547,7 +557,7 @@ def _objects_by_segmentation(
 ) -> _Objects:
     """Contours of eq. 1's objects with D_alpha, centroid-inside and centroid (ROI pixels).
 
-    ``circles`` is the ring colonies' circle search (:func:`ring_circles`) started beside.
+    ``circles`` is the ring colonies' circle search (:func:`ring_circles`), started beside.
     """
     dev = deviation(roi, background, params.channel_weights)
     t = adaptive_threshold(dev, usable, params.color_threshold, params.noise_factor)

@@ -25,6 +25,7 @@ know in advance. Choices made here:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -151,8 +152,70 @@ _RIM_ANGLES = 720  # angles sampled round the band (40 per sector)
 _PIXEL = np.dtype((np.void, 3))  # one BGR uint8 pixel as a single item
 
 
+@dataclass(frozen=True)
+class RimProfile:
+    """The band's pixels and the dish's radial profile at them (:func:`rim_profile`).
+
+    ``index`` holds the flat pixel indices (``row * width + column``) of the band, ``lookup``
+    the profile's B, G, R at each (one row of ``3 n`` float32) and ``weight`` its blending
+    weight, repeated for the three channels (the same layout).
+    """
+
+    index: np.ndarray
+    lookup: np.ndarray
+    weight: np.ndarray
+
+
+def rim_profile(
+    image: np.ndarray, rim: tuple[float, float, float], band_px: float
+) -> RimProfile | None:
+    """The dish's radial profile over its outer band (see :func:`with_radial_rim`).
+
+    It needs only the image, so plate analysis takes it in a thread beside the cell estimate
+    of :func:`local_background`. None when the band holds no pixel of the image.
+    """
+    h, w = image.shape[:2]
+    cx, cy, r = (float(v) for v in rim)
+    r0 = max(r - band_px - 2.0, 0.0)
+    n_r, n_t = max(math.ceil(r + 2.0 - r0), 2), _RIM_ANGLES
+    theta = np.arange(n_t, dtype=np.float32) * np.float32(2 * np.pi / n_t)
+    radii = r0 + np.arange(n_r, dtype=np.float32)
+    map_x = (cx + np.cos(theta)[:, None] * radii[None, :]).astype(np.float32)
+    map_y = (cy + np.sin(theta)[:, None] * radii[None, :]).astype(np.float32)
+    band = cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    per = n_t // _RIM_SECTORS
+    medians = np.median(band.reshape(_RIM_SECTORS, per, n_r, 3), axis=1).astype(np.float32)
+    # sector centres, cyclically: row k of ``ring`` is the centre of sector k - 1
+    ring = np.concatenate((medians[-1:], medians, medians[:1]))
+    # the band's pixels, as (radius, angle) into the sector-median table
+    points = cv2.findNonZero(_annulus(h, w, cx, cy, r0 + 2.0, r + 2.0))
+    if points is None:
+        return None
+    xs, ys = points.reshape(-1, 2).T
+    dist, angle = (
+        v.ravel()
+        for v in cv2.cartToPolar(
+            xs.astype(np.float32) - np.float32(cx), ys.astype(np.float32) - np.float32(cy)
+        )
+    )  # angle in [0, 2 pi)
+    # row of ``ring``: sector k's centre (angle (k + 0.5) * 10 deg) is row k + 1
+    sector = angle * np.float32(_RIM_SECTORS / (2 * np.pi)) + np.float32(0.5)
+    lookup = _bilinear(ring, dist - np.float32(r0), sector)
+    weight = (dist - np.float32(r - band_px)) * np.float32(1.0 / max(band_px / 3.0, 1.0))
+    np.clip(weight, 0.0, 1.0, out=weight)
+    return RimProfile(
+        index=ys.astype(np.intp) * w + xs,
+        lookup=lookup.reshape(1, -1),
+        weight=np.repeat(weight, 3).reshape(1, -1),
+    )
+
+
 def with_radial_rim(
-    image: np.ndarray, background: np.ndarray, rim: tuple[float, float, float], band_px: float
+    image: np.ndarray,
+    background: np.ndarray,
+    rim: tuple[float, float, float],
+    band_px: float,
+    profile: RimProfile | None = None,
 ) -> np.ndarray:
     """``background`` with its outer band replaced by the dish's own radial profile.
 
@@ -169,47 +232,22 @@ def with_radial_rim(
     Sector medians are interpolated between sector centres (cyclically), looked up at every
     pixel of the band, and blended in over the outer ``band_px`` of the circle
     ``rim = (cx, cy, r)`` (full weight in the outer two thirds of the band, ramping over its
-    inner third). Only the band's pixels are touched.
+    inner third). Only the band's pixels are touched. ``profile`` is :func:`rim_profile` of
+    the same image, rim and band, when taken already.
     """
-    h, w = background.shape[:2]
-    cx, cy, r = (float(v) for v in rim)
-    r0 = max(r - band_px - 2.0, 0.0)
-    n_r, n_t = max(math.ceil(r + 2.0 - r0), 2), _RIM_ANGLES
-    theta = np.arange(n_t, dtype=np.float32) * np.float32(2 * np.pi / n_t)
-    radii = r0 + np.arange(n_r, dtype=np.float32)
-    map_x = (cx + np.cos(theta)[:, None] * radii[None, :]).astype(np.float32)
-    map_y = (cy + np.sin(theta)[:, None] * radii[None, :]).astype(np.float32)
-    band = cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    per = n_t // _RIM_SECTORS
-    medians = np.median(band.reshape(_RIM_SECTORS, per, n_r, 3), axis=1).astype(np.float32)
-    # sector centres, cyclically: row k of ``ring`` is the centre of sector k - 1
-    ring = np.concatenate((medians[-1:], medians, medians[:1]))
-    # the band's pixels, as (radius, angle) into the sector-median table
-    points = cv2.findNonZero(_annulus(h, w, cx, cy, r0 + 2.0, r + 2.0))
-    if points is None:
+    if profile is None:
+        profile = rim_profile(image, rim, band_px)
+    if profile is None:
         return background
-    xs, ys = points.reshape(-1, 2).T
-    dist, angle = (
-        v.ravel()
-        for v in cv2.cartToPolar(
-            xs.astype(np.float32) - np.float32(cx), ys.astype(np.float32) - np.float32(cy)
-        )
-    )  # angle in [0, 2 pi)
-    # row of ``ring``: sector k's centre (angle (k + 0.5) * 10 deg) is row k + 1
-    sector = angle * np.float32(_RIM_SECTORS / (2 * np.pi)) + np.float32(0.5)
-    lookup = _bilinear(ring, dist - np.float32(r0), sector)
-    weight = (dist - np.float32(r - band_px)) * np.float32(1.0 / max(band_px / 3.0, 1.0))
-    np.clip(weight, 0.0, 1.0, out=weight)
     out = background.copy()
     # one 3-byte item per pixel: gathering and scattering whole pixels is ~4x faster so
     pixels = out.reshape(-1).view(_PIXEL)
-    idx = ys.astype(np.intp) * w + xs
-    here = np.take(pixels, idx).view(np.uint8).reshape(1, -1).astype(np.float32)
+    here = np.take(pixels, profile.index).view(np.uint8).reshape(1, -1).astype(np.float32)
     # here + (lookup - here) * weight over flat rows of B, G, R values (numpy's broadcast of
     # the weight over rows of three is ~4x slower)
-    step = cv2.subtract(lookup.reshape(1, -1), here)
-    here = cv2.add(here, cv2.multiply(step, np.repeat(weight, 3).reshape(1, -1)))
-    np.put(pixels, idx, cv2.convertScaleAbs(here).reshape(-1).view(_PIXEL))
+    step = cv2.subtract(profile.lookup, here)
+    here = cv2.add(here, cv2.multiply(step, profile.weight))
+    np.put(pixels, profile.index, cv2.convertScaleAbs(here).reshape(-1).view(_PIXEL))
     return out
 
 
