@@ -12,8 +12,9 @@ Pipeline and the choices it makes where the paper leaves room:
    than ``analysis_px_per_mm`` are analysed on a resampled copy and the results mapped back
    (:mod:`labauto.vision.plate_scale`). Below, "px" means pixels of that working copy.
 1. **Dish.** :func:`labauto.vision.dish.find_dish`: a Hough circle on a subsampled grey image,
-   refined along rays where the colour leaves the agar's for about a millimetre (the meniscus or
-   the wall, not a thin lid line), with a robust circle fit. It reads 0.2-2.3 px short of the
+   refined along rays where the colour leaves the agar's for about a millimetre and does not come
+   back (the meniscus or the wall, not a line of the lid with agar beyond it), with a robust
+   circle fit. It reads 0.2-2.3 px short of the
    drawn agar edge on the synthetic plates. A dish with over a quarter of its rim outside the
    image is refused (``detect_dish=False`` analyses the whole image). The usable area is the
    dish shrunk by ``rim_margin_mm`` (negative grows it), or a configured circle
