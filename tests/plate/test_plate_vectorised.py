@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 
 from labauto.vision import dish as dish_module
-from labauto.vision import plate as plate_module
-from labauto.vision import plate_bodies
+from labauto.vision import plate_area, plate_bodies, plate_objects
 from labauto.vision.plate import PlateParams, analyze_plate
 from labauto.vision.plate_background import deviation
 
@@ -145,12 +144,12 @@ def stages(plates: list) -> list[tuple]:
     images = [img for img, _ in plates[:3]] + [_with_translucent_centres(*plates[0])]
     for img in images:
         # bodies at the usable border dropped: the crops then fit without the analysis' margin
-        _, copy, params, (x0, y0), usable, _ = plate_module.prepare_plate(
+        _, copy, params, (x0, y0), usable, _ = plate_area.prepare_plate(
             img, PlateParams(drop_at_border=True)
         )
         roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
-        contours, d_alpha, inside, _, rejected, fg = plate_module._objects_by_segmentation(
-            roi, usable, params, plate_module._background(roi, usable, params)
+        contours, d_alpha, inside, _, rejected, fg = plate_objects.objects_by_segmentation(
+            roi, usable, params, plate_objects.agar_background(roi, usable, params)
         )
         des_shape = np.asarray(inside, bool) & (d_alpha < params.des_threshold_deg)
         bodies = plate_bodies.measure_bodies(contours, fg, des_shape, params, rejected)
@@ -207,9 +206,9 @@ def test_vectorised_mix_scores_and_merged_counts_equal_per_body(
 
 def test_unit_weight_deviation_equals_the_weighted_formula(plates: list) -> None:
     img, _ = plates[4]
-    _, copy, params, (x0, y0), usable, _ = plate_module.prepare_plate(img, PlateParams())
+    _, copy, params, (x0, y0), usable, _ = plate_area.prepare_plate(img, PlateParams())
     roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
-    background = plate_module._background(roi, usable, params)
+    background = plate_objects.agar_background(roi, usable, params)
     fast = deviation(roi, background, (1.0, 1.0, 1.0))  # the channel-by-channel path
     diff = roi.astype(np.float32) - background.astype(np.float32)
     np.testing.assert_array_equal(fast, (diff * diff).sum(axis=2))  # the formula, in full
