@@ -64,8 +64,9 @@ def local_background(
         whole = cv2.resize(whole, (fw * s // 2, fh * s // 2), interpolation=cv2.INTER_AREA)
     small = cv2.resize(whole, (fw, fh), interpolation=cv2.INTER_AREA)
     small = cv2.copyMakeBorder(small, 0, sh - fh, 0, sw - fw, cv2.BORDER_REPLICATE)
-    valid = cv2.copyMakeBorder(usable, 0, sh * s - h, 0, sw * s - w, cv2.BORDER_CONSTANT, value=0)
-    valid = np.ascontiguousarray(valid[s // 2 :: s, s // 2 :: s])  # a cell's centre pixel
+    valid = np.zeros((sh, sw), np.uint8)  # a cell's centre pixel; 0 past the image's edge
+    centres = usable[s // 2 :: s, s // 2 :: s]
+    valid[: centres.shape[0], : centres.shape[1]] = centres
     outlier = np.zeros((sh, sw), np.uint8)
     # the wide median on cells twice as large (the same ~25 mm, a quarter of the work)
     half = cv2.resize(small, (max(sw // 2, 1), max(sh // 2, 1)), interpolation=cv2.INTER_AREA)
@@ -92,7 +93,7 @@ def local_background(
         num = cv2.GaussianBlur(weighted, (0, 0), sigma)
         den = cv2.GaussianBlur(weight, (0, 0), sigma)
         here = (den > 0.05) & ~filled
-        bg_small[here] = num[here] / den[here][:, None]
+        np.divide(num, den[..., None], out=bg_small, where=here[..., None])
         filled |= here
     bg_small = cv2.convertScaleAbs(bg_small)
     return cv2.resize(bg_small, (w, h), interpolation=cv2.INTER_LINEAR)
@@ -104,11 +105,9 @@ def deviation(
     """Summed (weighted) squared difference over B, G, R from the background (float32, HxW)."""
     diff = cv2.absdiff(image, background)
     if tuple(weights) == (1.0, 1.0, 1.0):
-        # the plain sum of squares, channel by channel into one plane (exact integers)
-        dev = np.zeros(diff.shape[:2], np.float32)
-        for channel in cv2.split(diff):
-            cv2.accumulateSquare(channel, dev)
-        return dev
+        # the plain sum of squares: the squares in float32, summed over the channels (exact
+        # integers below 2^24; ~2x quicker than accumulating the split channels)
+        return cv2.transform(cv2.multiply(diff, diff, dtype=cv2.CV_32F), _ONES_3)
     return cv2.transform(cv2.LUT(diff, _SQUARES), np.asarray(weights, np.float32).reshape(1, 3))
 
 
