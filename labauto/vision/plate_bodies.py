@@ -196,15 +196,21 @@ def _small_holes_filled(
 ) -> np.ndarray:
     """``solid`` with every hole of a body under ``HOLE_SHARE`` of its filled contour filled."""
     holes = cv2.compare(filled, solid, cv2.CMP_GT)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(holes, connectivity=4)
+    # labels without statistics, each hole's area and body read at its own pixels (quicker
+    # than connectedComponentsWithStats over the canvas)
+    n, labels = cv2.connectedComponents(holes, connectivity=4)
     if n <= 1:
         return solid
+    xs, ys = cv2.findNonZero(holes).reshape(-1, 2).T
+    hole = labels[ys, xs]
+    owner = np.zeros(n, np.intp)
+    owner[hole] = row_body[ys]  # any row of a hole: no canvas row holds two bodies
     body_area = np.add.reduceat(np.count_nonzero(filled, axis=1), row)
-    owner = row_body[stats[1:, cv2.CC_STAT_TOP]]
-    small = np.zeros(n, bool)
-    small[1:] = stats[1:, cv2.CC_STAT_AREA] < HOLE_SHARE * body_area[owner]
+    small = np.bincount(hole, minlength=n) < HOLE_SHARE * body_area[owner]
+    small[0] = False
+    filled_in = small[hole]
     out = solid.copy()
-    out[small[labels]] = 1
+    out[ys[filled_in], xs[filled_in]] = 1
     return out
 
 
