@@ -212,7 +212,7 @@ def _bodies_departing(
         if solidity < _MIN_SOLIDITY or area / (math.pi * radius * radius) < _MIN_ROUNDNESS:
             continue
         ring = cv2.subtract(cv2.dilate(body, _RING), cv2.erode(body, _RING))
-        contrast = float(np.median(norm[y : y + bh, x : x + bw][body > 0]))
+        contrast = median(norm[y : y + bh, x : x + bw][body > 0])
         sharpness = float(np.percentile(_edge_in(diff, (x, y, bw, bh))[ring > 0], 75))
         # the edge is at most a millimetre wide, or (a large colony) 1 / _EDGE_RADII of its
         # radius, with a floor
