@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from labauto.synthetic.plates import generate_plate
@@ -16,10 +18,22 @@ def _prepared(img: np.ndarray) -> tuple:
 
 
 def test_threaded_background_and_objects_equal_the_sequence() -> None:
-    # faint ring colonies and colonies at the meniscus: the rim profile and the ring search
-    # both change the outcome on this plate
-    img, _ = generate_plate(5, agar="amber", faint_fraction=0.4, ring_edge=0.6, n_meniscus=3)
+    # faint colonies with a dark rim (as on AGAR plate 510) and colonies at the meniscus: the
+    # rim profile and the ring search both change the outcome on this plate
+    img, _ = generate_plate(
+        1, agar="amber", faint_fraction=1.0, faint_contrast=0.04, ring_edge=10.0, n_meniscus=3
+    )
     roi, usable, rim, params = _prepared(img)
+    without_rings = replace(params, find_rings=False)
+    assert not np.array_equal(
+        plate_objects.agar_background(roi, usable, params, rim),
+        plate_objects.agar_background(roi, usable, params),
+    )
+    bg = plate_objects.agar_background(roi, usable, params, rim)
+    assert not np.array_equal(
+        plate_objects.objects_by_segmentation(roi, usable, params, bg)[5],
+        plate_objects.objects_by_segmentation(roi, usable, without_rings, bg)[5],
+    )
     assert rim is not None and params.find_rings and params.rim_band_mm > 0
     profile, circles = plate_objects.start_beside(roi, usable, rim, params)
     assert profile is not None and circles is not None
