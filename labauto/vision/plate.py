@@ -35,7 +35,10 @@ Pipeline and the choices it makes where the paper leaves room:
    each contour point is a 5x5 Sobel of the deviation image: it points into every object,
    whatever its colour. D_alpha, the centroid and the centroid-inside test come from
    :func:`labauto.vision.shape_angle.shape_angles`, vectorised over all contours.
-   ``method="detector"`` uses :func:`labauto.vision.detector.detect` instead (slower).
+   ``method="detector"`` uses :func:`labauto.vision.detector.detect` instead (slower). The
+   rim's radial profile and the ring colonies' circle search need only the image: they run in
+   a thread beside the rest of this step (:func:`labauto.vision.plate_objects.start_beside`),
+   with the same results as in sequence (:mod:`labauto.vision.plate_objects`).
 3. **Artefacts** are dropped, in this order: ``area < min_colony_area_px`` (dust) or
    ``> max_colony_area_px``; mean width ``2 * area / perimeter < min_width_px`` (scratches, thin
    pen strokes: a disc of radius r gives r, a strip of width w gives w); elongation
