@@ -157,9 +157,11 @@ def _refine_dish(
     # _AGAR_AGAIN_MM within _LINE_MM; thin lines of the lid or the meniscus are passed
     px_per_mm = r / 45.0
     departed = dist >= _DISH_EDGE_CONTRAST
-    lasting = _runs_from(departed, max(round(px_per_mm / step), 1))
-    agar_again = _runs_from(~departed, max(round(_AGAR_AGAIN_MM * px_per_mm / step), 1))
-    comes_back = _any_within(agar_again, max(round(_LINE_MM * px_per_mm / step), 1))
+    run = max(round(px_per_mm / step), 1)
+    lasting = _count_ahead(departed, run) == run
+    again = max(round(_AGAR_AGAIN_MM * px_per_mm / step), 1)
+    agar_again = _count_ahead(~departed, again) == again
+    comes_back = _count_ahead(agar_again, max(round(_LINE_MM * px_per_mm / step), 1)) > 0
     edge = lasting & ~comes_back
     first = np.argmax(edge, axis=1)
     ok = edge[rows, first] & (first > 0)
@@ -192,23 +194,13 @@ def _refine_dish(
     return fit
 
 
-def _runs_from(flags: np.ndarray, length: int) -> np.ndarray:
-    """True where ``flags`` (rays x samples, bool) holds for ``length`` samples from there on."""
-    n = flags.shape[1]
-    window = np.cumsum(np.pad(flags.astype(np.int32), ((0, 0), (1, 0))), axis=1)
-    out = np.zeros(flags.shape, bool)
-    if length <= n:
-        out[:, : n - length + 1] = (window[:, length:] - window[:, :-length]) == length
-    return out
-
-
-def _any_within(flags: np.ndarray, length: int) -> np.ndarray:
-    """True where ``flags`` (rays x samples, bool) holds somewhere in the next ``length`` samples
-    (from there on, that one included)."""
+def _count_ahead(flags: np.ndarray, length: int) -> np.ndarray:
+    """How many of the next ``length`` samples (that one included, cut at the ray's end) hold
+    ``flags`` (rays x samples, bool), at every sample."""
     n = flags.shape[1]
     window = np.cumsum(np.pad(flags.astype(np.int32), ((0, 0), (1, 0))), axis=1)
     start = np.arange(n)
-    return (window[:, np.minimum(start + length, n)] - window[:, start]) > 0
+    return window[:, np.minimum(start + length, n)] - window[:, start]
 
 
 def _fit_circle(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:

@@ -168,10 +168,24 @@ class RimProfile:
 def rim_profile(
     image: np.ndarray, rim: tuple[float, float, float], band_px: float
 ) -> RimProfile | None:
-    """The dish's radial profile over its outer band (see :func:`with_radial_rim`).
+    """The dish's own radial profile over the outer band, to replace the background there.
 
-    It needs only the image, so plate analysis takes it in a thread beside the cell estimate
-    of :func:`local_background`. None when the band holds no pixel of the image.
+    Near the wall the agar's colour changes within a millimetre or two (the meniscus: a bright
+    or dark ring), faster than the cell estimate can follow; eq. 1 then sees the ring as one
+    body that swallows every colony touching it. The meniscus is (nearly) the same all round,
+    so the band is unwrapped to polar coordinates (``cv2.remap``, 1 px per radius step, 720
+    angles) and, in each 20-degree sector, the median over the angles at every radius is the
+    background there: colonies cover less than half of a sector's arc at any radius (the arc
+    is ~14 mm at the edge of a 90 mm dish). Sectors of 10 degrees took colonies of 7 mm and
+    more in the band for the background and cut them into crescents; with 20 degrees, AGAR F1
+    0.842 -> 0.845, median count error 16.7 -> 14.0 %, phone-counts 2.9 -> 2.7 % (12 sectors:
+    F1 0.845, 16.2 % and 3.1 %).
+    Sector medians are interpolated between sector centres (cyclically), looked up at every
+    pixel of the band, and blended in over the outer ``band_px`` of the circle
+    ``rim = (cx, cy, r)`` (full weight in the outer two thirds of the band, ramping over its
+    inner third) by :func:`with_radial_rim`. It needs only the image, so plate analysis takes it
+    in a thread beside the cell estimate of :func:`local_background`. None when the band
+    holds no pixel of the image.
     """
     h, w = image.shape[:2]
     cx, cy, r = (float(v) for v in rim)
@@ -209,33 +223,12 @@ def rim_profile(
     )
 
 
-def with_radial_rim(
-    image: np.ndarray,
-    background: np.ndarray,
-    rim: tuple[float, float, float],
-    band_px: float,
-    profile: RimProfile | None = None,
-) -> np.ndarray:
-    """``background`` with its outer band replaced by the dish's own radial profile.
+def with_radial_rim(background: np.ndarray, profile: RimProfile | None) -> np.ndarray:
+    """``background`` with its outer band blended towards the dish's radial profile.
 
-    Near the wall the agar's colour changes within a millimetre or two (the meniscus: a bright
-    or dark ring), faster than the cell estimate can follow; eq. 1 then sees the ring as one
-    body that swallows every colony touching it. The meniscus is (nearly) the same all round,
-    so the band is unwrapped to polar coordinates (``cv2.remap``, 1 px per radius step, 720
-    angles) and, in each 20-degree sector, the median over the angles at every radius is the
-    background there: colonies cover less than half of a sector's arc at any radius (the arc
-    is ~14 mm at the edge of a 90 mm dish). Sectors of 10 degrees took colonies of 7 mm and
-    more in the band for the background and cut them into crescents; with 20 degrees, AGAR F1
-    0.842 -> 0.845, median count error 16.7 -> 14.0 %, phone-counts 2.9 -> 2.7 % (12 sectors:
-    F1 0.845, 16.2 % and 3.1 %).
-    Sector medians are interpolated between sector centres (cyclically), looked up at every
-    pixel of the band, and blended in over the outer ``band_px`` of the circle
-    ``rim = (cx, cy, r)`` (full weight in the outer two thirds of the band, ramping over its
-    inner third). Only the band's pixels are touched. ``profile`` is :func:`rim_profile` of
-    the same image, rim and band, when taken already.
+    ``profile`` is :func:`rim_profile` of the image (None: ``background`` as it is). Only the
+    band's pixels are touched.
     """
-    if profile is None:
-        profile = rim_profile(image, rim, band_px)
     if profile is None:
         return background
     out = background.copy()

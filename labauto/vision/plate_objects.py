@@ -80,10 +80,8 @@ def agar_background(
     bg = local_background(roi, usable, cell, params.color_threshold)
     if rim is None or params.rim_band_mm <= 0:
         return bg
-    if profile is None:
-        return with_radial_rim(roi, bg, rim, rim_band_px(params))
-    found = profile.result()
-    return bg if found is None else with_radial_rim(roi, bg, rim, rim_band_px(params), found)
+    found = rim_profile(roi, rim, rim_band_px(params)) if profile is None else profile.result()
+    return with_radial_rim(bg, found)
 
 
 def _gradients(dev: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -145,8 +143,9 @@ def objects_by_segmentation(
         )
         fg = cv2.bitwise_or(fg, faint)
     if params.find_rings:
-        found = None if circles is None else circles.result()
-        fg = ring_bodies(roi, usable, fg, float(params.px_per_mm or 1.0), circles=found)
+        ppm = float(params.px_per_mm or 1.0)
+        found = ring_circles(roi, usable, ppm) if circles is None else circles.result()
+        fg = ring_bodies(usable, fg, found, ppm)
     if params.open_mm > 0:
         # lines thinner than open_mm (the lid's and the wall's edges, scratches, hairs) go, so
         # colonies touching them come apart from them

@@ -141,7 +141,7 @@ class PlateParams:
         0.748.
     rim_band_mm : float
         Width of the band inside the agar's edge whose background follows the dish's radial
-        profile (the meniscus; see :func:`labauto.vision.plate_background.with_radial_rim`);
+        profile (the meniscus; see :func:`labauto.vision.plate_background.rim_profile`);
         0 turns it off.
     faint_factor : float
         Faint colonies (:mod:`labauto.vision.plate_faint`): a smoothed departure from a coarse

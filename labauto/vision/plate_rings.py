@@ -73,8 +73,9 @@ def ring_circles(
 ) -> np.ndarray:
     """The circles ``(x, y, r)`` (image pixels, strongest first) whose edge stands out.
 
-    The circle search of :func:`ring_bodies`, on the image alone (no foreground): plate analysis
-    runs it in a thread of its own beside eq. 1's segmentation.
+    The circle search, on the image alone (no foreground; :func:`ring_bodies` then tests the
+    circles against it): plate analysis runs it in a thread of its own beside eq. 1's
+    segmentation.
 
     Parameters
     ----------
@@ -112,35 +113,30 @@ def ring_circles(
 
 
 def ring_bodies(
-    image: np.ndarray,
     usable: np.ndarray,
     foreground: np.ndarray,
+    circles: np.ndarray,
     px_per_mm: float,
     *,
-    circles: np.ndarray | None = None,
     max_found: float = 0.2,
     margin_mm: float = 1.0,
 ) -> np.ndarray:
-    """``foreground`` (uint8 0 / 255) with the ring colonies filled in.
+    """``foreground`` (uint8 0 / 255) with the ring colonies of ``circles`` filled in.
 
     Parameters
     ----------
-    image : ndarray
-        HxWx3 BGR uint8 (the dish's bounding box, as analysed).
     usable : ndarray
         HxW uint8 mask of the usable agar.
     foreground : ndarray
         HxW uint8 mask of eq. 1's (and the faint pass's) foreground; not changed.
+    circles : ndarray
+        :func:`ring_circles` of the image.
     px_per_mm : float
-        Scale of ``image``.
-    circles : ndarray, optional
-        :func:`ring_circles` of the image, when taken already (with its default search).
+        Scale of the image.
     max_found, margin_mm
         See the module docstring.
     """
     out = foreground.copy()
-    if circles is None:
-        circles = ring_circles(image, usable, px_per_mm)
     h, w = usable.shape
     margin = margin_mm * px_per_mm
     accepted = np.zeros((h, w), np.uint8)

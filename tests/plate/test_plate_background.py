@@ -9,6 +9,7 @@ from labauto.vision.plate_background import (
     deviation,
     local_background,
     open_thin_lines,
+    rim_profile,
     with_hued_bodies,
     with_radial_rim,
 )
@@ -47,7 +48,7 @@ def test_the_meniscus_ring_goes_into_the_background() -> None:
     cv2.circle(usable, (200, 200), 182, 255, -1)
     bg = local_background(img, usable, 8, 600.0)
     ring_before = deviation(img, bg, (1.0, 1.0, 1.0))[200, 376]
-    bg = with_radial_rim(img, bg, (200.0, 200.0, 182.0), 40.0)
+    bg = with_radial_rim(bg, rim_profile(img, (200.0, 200.0, 182.0), 40.0))
     dev = deviation(img, bg, (1.0, 1.0, 1.0))
     assert ring_before > 3000  # the cell background does not follow a 6 px ring
     assert dev[200, 376] < 300 and dev[24, 200] < 300  # the radial profile does, all round

@@ -7,7 +7,7 @@ import numpy as np
 
 from labauto.synthetic.plates import generate_plate, score_plate
 from labauto.vision.plate import PlateParams, analyze_plate
-from labauto.vision.plate_rings import ring_bodies
+from labauto.vision.plate_rings import ring_bodies, ring_circles
 
 PX_PER_MM = 12.0
 
@@ -30,10 +30,15 @@ def _usable() -> np.ndarray:
     return usable
 
 
+def _rings(img: np.ndarray, fg: np.ndarray) -> np.ndarray:
+    """The ring search on ``img`` and its circles filled into ``fg``."""
+    return ring_bodies(_usable(), fg, ring_circles(img, _usable(), PX_PER_MM), PX_PER_MM)
+
+
 def test_a_ring_is_filled_as_a_disc() -> None:
     img = _agar_with_rings([(200, 300), (400, 300)])
     fg = np.zeros((600, 600), np.uint8)
-    out = ring_bodies(img, _usable(), fg, PX_PER_MM)
+    out = _rings(img, fg)
     assert not fg.any()  # the input is not changed
     n, _, stats, centroids = cv2.connectedComponentsWithStats(out)
     assert n == 3
@@ -47,20 +52,20 @@ def test_a_ring_is_filled_as_a_disc() -> None:
 
 def test_flat_agar_gives_no_ring() -> None:
     img = _agar_with_rings([])
-    assert not ring_bodies(img, _usable(), np.zeros((600, 600), np.uint8), PX_PER_MM).any()
+    assert not _rings(img, np.zeros((600, 600), np.uint8)).any()
 
 
 def test_a_colony_found_already_is_left_as_it_is() -> None:
     img = _agar_with_rings([(300, 300)])
     fg = np.zeros((600, 600), np.uint8)
     cv2.circle(fg, (300, 300), 30, 255, -1)  # eq. 1 found most of it
-    out = ring_bodies(img, _usable(), fg, PX_PER_MM)
+    out = _rings(img, fg)
     assert np.array_equal(out, fg)
 
 
 def test_a_ring_on_the_agar_edge_is_not_taken() -> None:
     img = _agar_with_rings([(300, 30)])  # cut by the usable area's border (it starts at y=10)
-    assert not ring_bodies(img, _usable(), np.zeros((600, 600), np.uint8), PX_PER_MM).any()
+    assert not _rings(img, np.zeros((600, 600), np.uint8)).any()
 
 
 def test_a_piece_inside_joins_the_ring_and_a_neighbour_stays_apart() -> None:
@@ -68,7 +73,7 @@ def test_a_piece_inside_joins_the_ring_and_a_neighbour_stays_apart() -> None:
     fg = np.zeros((600, 600), np.uint8)
     cv2.circle(fg, (300, 300), 8, 255, -1)  # the ring's darker centre, found by eq. 1
     cv2.circle(fg, (352, 300), 20, 255, -1)  # a neighbour reaching into the disc
-    out = ring_bodies(img, _usable(), fg, PX_PER_MM)
+    out = _rings(img, fg)
     n, labels = cv2.connectedComponents(out)
     assert n == 3  # the ring (with its centre) and the neighbour, not one body
     assert labels[300, 300] != labels[300, 352]
