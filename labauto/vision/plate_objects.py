@@ -23,7 +23,7 @@ from labauto.vision.plate_background import (
     local_background,
     open_thin_lines,
     rim_profile,
-    with_hued_bodies,
+    with_erased_colonies,
     with_radial_rim,
 )
 from labauto.vision.plate_bodies import PAD
@@ -151,7 +151,7 @@ def objects_by_segmentation(
         # colonies touching them come apart from them
         k = 2 * math.floor(params.open_mm * float(params.px_per_mm or 0.0) / 2) + 1  # odd
         if k >= 3:
-            fg = with_hued_bodies(fg, open_thin_lines(fg, k), roi, background)
+            fg = with_erased_colonies(fg, open_thin_lines(fg, k), roi, background, k)
     # outer boundaries of every body, also of bodies lying in another's hole (a colony inside
     # the meniscus ring): RETR_CCOMP puts all outer boundaries at the top level
     traced, hierarchy = cv2.findContours(fg, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
