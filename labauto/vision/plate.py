@@ -32,7 +32,7 @@ Pipeline and the choices it makes where the paper leaves room:
    that foreground. Lines thinner than ``open_mm`` are opened away so colonies touching them
    come apart, and fragments of thick strokes are dropped; small colonies the opening erased
    whole come back when hued or lone and translucent
-   (:func:`labauto.vision.plate_background.with_erased_colonies`). Outer contours of all
+   (:mod:`labauto.vision.plate_opening`). Outer contours of all
    bodies, also those lying in another's hole, are traced in the 8-neighbourhood (OpenCV). The
    gradient at each contour point is a 5x5 Sobel of the deviation image: it points into every
    object, whatever its colour. D_alpha, the centroid and the centroid-inside test come from

@@ -21,13 +21,12 @@ from labauto.vision.plate_background import (
     deviation,
     hysteresis,
     local_background,
-    open_thin_lines,
     rim_profile,
-    with_erased_colonies,
     with_radial_rim,
 )
 from labauto.vision.plate_bodies import PAD
 from labauto.vision.plate_faint import faint_bodies
+from labauto.vision.plate_opening import open_thin_lines, with_erased_colonies
 from labauto.vision.plate_params import Circle, PlateParams
 from labauto.vision.plate_rings import ring_bodies, ring_circles
 from labauto.vision.shape_angle import shape_angles
