@@ -31,12 +31,12 @@ Pipeline and the choices it makes where the paper leaves room:
    body inside, by the circular Hough transform, :mod:`labauto.vision.plate_rings`) are added to
    that foreground. Lines thinner than ``open_mm`` are opened away so colonies touching them
    come apart, and fragments of thick strokes are dropped; small colonies the opening erased
-   whole come back when hued or lone and translucent
-   (:mod:`labauto.vision.plate_opening`). Outer contours of all
-   bodies, also those lying in another's hole, are traced in the 8-neighbourhood (OpenCV). The
-   gradient at each contour point is a 5x5 Sobel of the deviation image: it points into every
-   object, whatever its colour. D_alpha, the centroid and the centroid-inside test come from
-   :func:`labauto.vision.shape_angle.shape_angles`, vectorised over all contours.
+   whole come back when hued, or lone and translucent (:mod:`labauto.vision.plate_opening`).
+   Outer contours of all bodies, also those lying in another's hole, are traced in the
+   8-neighbourhood (OpenCV). The gradient at each contour point is a 5x5 Sobel of the deviation
+   image: it points into every object, whatever its colour. D_alpha, the centroid and the
+   centroid-inside test come from :func:`labauto.vision.shape_angle.shape_angles`, vectorised
+   over all contours.
    ``method="detector"`` uses :func:`labauto.vision.detector.detect` instead (slower). The
    rim's radial profile and the ring colonies' circle search need only the image: they run in
    a thread beside the rest of this step (:func:`labauto.vision.plate_objects.start_beside`),
