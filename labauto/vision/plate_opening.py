@@ -99,7 +99,7 @@ def with_erased_colonies(
       (``benchmarks/bench_real_plates.py``): AGAR matched 1553 -> 1567, reported 1621 ->
       1644 (F1 0.886 -> 0.888; 734 +8, 518 +2), median count error 10.5 -> 11.5 % (plates
       over 15 %: 13 -> 14);
-      phone-counts median 3.4 -> 3.0 %; at 7 px/mm F1 0.856 -> 0.860, phone-counts 5.3 ->
+      phone-counts median 3.4 -> 3.0 %; at 7 px/mm F1 0.857 -> 0.860, phone-counts 5.3 ->
       4.8 %; at 4.5 px/mm F1 0.847 -> 0.852, phone-counts 6.6 -> 7.2 %. Clearances of 1.5-4
       discs gave F1 0.887-0.888 (measured before the opacity test).
     """
