@@ -59,7 +59,9 @@ Pipeline and the choices it makes where the paper leaves room:
    (generator: singles <= 0.12, merged >= 0.22; ``max_concavity`` 0.2). Real colonies are round, so
    an authentic colony's axis ratio is at most ``max_authentic_elongation`` (1.2), and its distance
    transform has one peak (step 5 counts every body): two colonies that meet in a shallow waist
-   pass the DES tests, and picking one would take a mix of two. Merged: every other object. Mixed:
+   pass the DES tests, and picking one would take a mix of two. A lone grey or white dot that
+   the opening had erased and that came back (step 2) is doubtful and no DES: counted, never
+   offered. Merged: every other object. Mixed:
    a DES whose colours do not follow one species' dome. Its pixels at least ``edge_skip_px`` inside
    the boundary are fitted per channel by a quadratic in the normalised distance to the boundary
    (the dome shading of one species); a pixel farther than ``mix_residual`` grey levels (Euclidean,
@@ -184,11 +186,13 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
         objects = objects_by_detector(roi, usable, params)
     else:
         objects = objects_by_segmentation(roi, usable, params, background, circles)
-    contours, d_alpha, inside, centroids, rejected, fg = objects
+    contours, d_alpha, centroids = objects.contours, objects.d_alpha, objects.centroids
+    rejected, fg = objects.rejected, objects.foreground
     stage_done("objects")
 
-    # a DES needs its centroid inside and a small D_alpha; only then does the waist matter
-    des_shape = np.asarray(inside, bool) & (np.asarray(d_alpha) < params.des_threshold_deg)
+    # a DES needs its centroid inside and a small D_alpha; only then does the waist matter. A
+    # doubtful object (a lone dot the opening had erased) is counted, never offered: no DES
+    des_shape = objects.inside & (d_alpha < params.des_threshold_deg) & ~objects.doubtful
     bodies = measure_bodies(contours, fg, des_shape, params, rejected)
     stroke_shaped = bodies.stroke.copy()
     ppm = float(params.px_per_mm or 0.0)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -93,10 +94,29 @@ def _gradients(dev: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.column_stack((patch @ _SOBEL5_X, patch @ _SOBEL5_Y))
 
 
-# contours, D_alpha, centroid inside, centroids (ROI pixels), reject counts, foreground or None
-Objects = tuple[
-    list[np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, int], np.ndarray | None
-]
+@dataclass
+class Objects:
+    """The objects found on the agar (ROI pixels), one entry per contour.
+
+    ``doubtful`` marks the objects that are counted but never offered for picking: lone dots
+    the opening erased and that came back without a hue of their own
+    (:func:`labauto.vision.plate_opening.with_erased_colonies`). ``foreground`` is eq. 1's
+    final mask (None for the generic detector).
+    """
+
+    contours: list[np.ndarray]
+    d_alpha: np.ndarray
+    inside: np.ndarray  # centroid-inside test
+    centroids: np.ndarray
+    rejected: dict[str, int]
+    foreground: np.ndarray | None
+    doubtful: np.ndarray
+
+    @classmethod
+    def none(cls, rejected: dict[str, int], foreground: np.ndarray | None) -> Objects:
+        """No object (all rejected, or none found)."""
+        empty = np.zeros(0, bool)
+        return cls([], np.zeros(0), empty, np.zeros((0, 2)), rejected, foreground, empty)
 
 
 def _at_rim(usable: np.ndarray, contours: list[np.ndarray]) -> np.ndarray:
@@ -145,12 +165,13 @@ def objects_by_segmentation(
         ppm = float(params.px_per_mm or 1.0)
         found = ring_circles(roi, usable, ppm) if circles is None else circles.result()
         fg = ring_bodies(usable, fg, found, ppm)
+    dots = None  # lone dots put back after the opening: doubtful colonies
     if params.open_mm > 0:
         # lines thinner than open_mm (the lid's and the wall's edges, scratches, hairs) go, so
         # colonies touching them come apart from them
         k = 2 * math.floor(params.open_mm * float(params.px_per_mm or 0.0) / 2) + 1  # odd
         if k >= 3:
-            fg = with_erased_colonies(fg, open_thin_lines(fg, k), roi, background, k)
+            fg, dots = with_erased_colonies(fg, open_thin_lines(fg, k), roi, background, k)
     # outer boundaries of every body, also of bodies lying in another's hole (a colony inside
     # the meniscus ring): RETR_CCOMP puts all outer boundaries at the top level
     traced, hierarchy = cv2.findContours(fg, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
@@ -159,21 +180,26 @@ def objects_by_segmentation(
     candidates = [c for c in found if len(c) >= min_points]
     rejected = {"dust": len(found) - len(candidates), "rim": 0}
     if not candidates:
-        return [], np.zeros(0), np.zeros(0, bool), np.zeros((0, 2)), rejected, fg
+        return Objects.none(rejected, fg)
     at_rim = np.zeros(len(candidates), bool)
     if params.drop_at_border:
         at_rim = _at_rim(usable, candidates)
     kept = [c for c, rim in zip(candidates, at_rim.tolist(), strict=True) if not rim]
     rejected["rim"] = len(candidates) - len(kept)
     if not kept:
-        return [], np.zeros(0), np.zeros(0, bool), np.zeros((0, 2)), rejected, fg
+        return Objects.none(rejected, fg)
     offsets = np.cumsum([0] + [len(c) for c in kept])
     points = np.concatenate(kept).reshape(-1, 2)
     grads = _gradients(dev, points)
     sa = shape_angles(
         points.astype(np.float64), grads.astype(np.float64), offsets, np.ones(len(kept), bool)
     )
-    return kept, sa.statistic(params.statistic), sa.centroid_inside, sa.centroid, rejected, fg
+    doubtful = np.zeros(len(kept), bool)
+    if dots is not None:  # a dot touches nothing else: its contour lies on it
+        first = np.array([c[0, 0] for c in kept])
+        doubtful = dots[first[:, 1], first[:, 0]] > 0
+    statistic = sa.statistic(params.statistic)
+    return Objects(kept, statistic, sa.centroid_inside, sa.centroid, rejected, fg, doubtful)
 
 
 def objects_by_detector(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> Objects:
@@ -203,11 +229,12 @@ def objects_by_detector(roi: np.ndarray, usable: np.ndarray, params: PlateParams
         d_alpha.append(obj.d_alpha_median if params.statistic == "median" else obj.d_alpha_mean)
         inside.append(obj.centroid_inside)
         centroids.append(obj.centroid)
-    return (
+    return Objects(
         contours,
         np.asarray(d_alpha, float),
         np.asarray(inside, bool),
         np.asarray(centroids, float).reshape(-1, 2),
         rejected,
         None,
+        np.zeros(len(contours), bool),
     )

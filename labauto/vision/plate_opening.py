@@ -65,10 +65,11 @@ _DOT_CLEAR = 2.5  # ... with no other foreground within this many discs of its c
 
 def with_erased_colonies(
     fg: np.ndarray, opened: np.ndarray, image: np.ndarray, background: np.ndarray, disc_px: int
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray | None]:
     """``opened`` with the bodies of ``fg`` that the opening erased whole and that look like
     small colonies put back: those whose colour departs from the agar mostly in hue, and lone
-    dots.
+    dots; and a mask (uint8 0 / 255) of the lone dots without a hue of their own, or None when
+    none came back.
 
     The opening (:func:`open_thin_lines`, a disc of ``disc_px``) also erases colonies narrower
     than its disc (under ~0.8 mm), and a small colony whose core alone passes eq. 1 is narrower
@@ -96,17 +97,22 @@ def with_erased_colonies(
       its agar or more is opaque, dust or a full stop, and stays erased (the AGAR dots
       holding a boxed colony let through 9-18 % less; the generator's dust specks 23-40 %,
       those under 25 % smaller than the least colony). Measured
-      (``benchmarks/bench_real_plates.py``): AGAR matched 1553 -> 1567, reported 1621 ->
-      1644 (F1 0.886 -> 0.888; 734 +8, 518 +2), median count error 10.5 -> 11.5 % (plates
-      over 15 %: 13 -> 14);
-      phone-counts median 3.4 -> 3.0 %; at 7 px/mm F1 0.857 -> 0.860, phone-counts 5.3 ->
-      4.8 %; at 4.5 px/mm F1 0.847 -> 0.852, phone-counts 6.6 -> 7.2 %. Clearances of 1.5-4
-      discs gave F1 0.887-0.888 (measured before the opacity test).
+      (``benchmarks/bench_real_plates.py``, with the dots not offered as below): AGAR matched
+      1553 -> 1567, reported 1621 -> 1643 (F1 0.886 -> 0.888; 734 +8, 518 +2), median count
+      error 10.5 -> 11.5 % (plates over 15 %: 13 -> 14); phone-counts median 3.4 -> 3.0 %;
+      at 7 px/mm F1 0.857 -> 0.860, phone-counts 5.3 -> 4.8 %; at 4.5 px/mm F1 0.847 ->
+      0.853, phone-counts 6.6 -> 7.2 %. Clearances of 1.5-4 discs gave F1 0.887-0.888
+      (measured before the opacity test).
+
+    A lone grey or white dot is a doubtful colony: plate analysis counts it but never offers it
+    for picking (:func:`labauto.vision.plate.analyze_plate`). Offered, such dots had added 4
+    offers holding no boxed colony at 7 px/mm (7 -> 11 of 838) and 1 at 4.5 px/mm; not
+    offered, the offers are as before at all three scales (874, 832 and 821).
     """
     removed = cv2.compare(fg, opened, cv2.CMP_GT)
     points = cv2.findNonZero(removed)
     if points is None:
-        return opened
+        return opened, None
     n, labels = cv2.connectedComponents(fg, connectivity=8)
     survived = np.zeros(n, bool)
     kept = cv2.findNonZero(opened)
@@ -117,7 +123,7 @@ def with_erased_colonies(
     label = labels[y, x]
     erased = ~survived[label]
     if not erased.any():
-        return opened
+        return opened, None
     x, y, label = x[erased], y[erased], label[erased]
     colour, agar = (_label_means(im, x, y, label, n) for im in (image, background))
     departure = colour - agar
@@ -126,13 +132,18 @@ def with_erased_colonies(
     # a colony under a millimetre is thin and lets light through; dust and printed dots are
     # opaque: they let through as little light as ink does
     opaque = colour.sum(axis=1) <= (1.0 - INK_PIXEL_DARKER) * agar.sum(axis=1)
-    keep = hued | (_lone_dots(fg, x, y, label, disc_px, n) & ~opaque)
-    keep = keep[label]
+    dot = _lone_dots(fg, x, y, label, disc_px, n) & ~opaque & ~hued
+    keep = (hued | dot)[label]
     if not keep.any():
-        return opened
+        return opened, None
     out = opened.copy()
     out[y[keep], x[keep]] = 255
-    return out
+    dots = None
+    if dot.any():
+        dots = np.zeros_like(fg)
+        mine = dot[label]
+        dots[y[mine], x[mine]] = 255
+    return out, dots
 
 
 def _label_means(

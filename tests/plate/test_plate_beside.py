@@ -31,8 +31,8 @@ def test_threaded_background_and_objects_equal_the_sequence() -> None:
     )
     bg = plate_objects.agar_background(roi, usable, params, rim)
     assert not np.array_equal(
-        plate_objects.objects_by_segmentation(roi, usable, params, bg)[5],
-        plate_objects.objects_by_segmentation(roi, usable, without_rings, bg)[5],
+        plate_objects.objects_by_segmentation(roi, usable, params, bg).foreground,
+        plate_objects.objects_by_segmentation(roi, usable, without_rings, bg).foreground,
     )
     assert rim is not None and params.find_rings and params.rim_band_mm > 0
     profile, circles = plate_objects.start_beside(roi, usable, rim, params)
@@ -42,11 +42,11 @@ def test_threaded_background_and_objects_equal_the_sequence() -> None:
     assert np.array_equal(beside_bg, alone_bg)
     beside = plate_objects.objects_by_segmentation(roi, usable, params, beside_bg, circles)
     alone = plate_objects.objects_by_segmentation(roi, usable, params, alone_bg)
-    assert len(beside[0]) == len(alone[0]) > 10
-    for a, b in zip(beside[0], alone[0], strict=True):
+    assert len(beside.contours) == len(alone.contours) > 10
+    for a, b in zip(beside.contours, alone.contours, strict=True):
         assert np.array_equal(a, b)
-    for k in (1, 2, 3, 5):
-        assert np.array_equal(beside[k], alone[k])
+    for name in ("d_alpha", "inside", "centroids", "foreground", "doubtful"):
+        assert np.array_equal(getattr(beside, name), getattr(alone, name)), name
 
 
 def test_nothing_is_started_when_the_steps_are_off() -> None:

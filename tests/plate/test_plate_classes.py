@@ -198,3 +198,15 @@ def test_a_small_colony_on_a_large_one_is_mixed(
     assert ringed.klass == "authentic"
     assert spotted.klass == ("mixed" if spot_mm > 0 else "authentic")
     assert spotted.mix_score < 0.06  # the fraction alone would offer it
+
+
+def test_a_lone_grey_dot_the_opening_erased_is_counted_but_not_offered() -> None:
+    # 0.5 mm across, 20 grey levels darker in every channel (no hue, lets 88 % of the light
+    # through): narrower than the 0.75 mm opening, it comes back as a lone dot, a doubtful
+    # colony: counted as one, never authentic. The large colony beside it is authentic.
+    img = _agar_with([(200, 300, 30)])
+    cv2.circle(img, (420, 300), 2, (100, 160, 185), -1, cv2.LINE_AA)
+    dot, colony = sorted(_analyse(img), key=lambda c: -c.centroid[0])
+    assert abs(dot.centroid[0] - 420) < 2 and abs(dot.centroid[1] - 300) < 2
+    assert (dot.klass, dot.estimated_count) == ("merged", 1)
+    assert colony.klass == "authentic"

@@ -51,7 +51,8 @@ def test_small_pigmented_colonies_the_opening_erased_come_back() -> None:
     assert cv2.connectedComponents(opened)[0] - 1 == 1
     background = np.empty_like(img)
     background[:] = agar
-    kept = with_erased_colonies(fg, opened, img, background, 7)
+    kept, dots = with_erased_colonies(fg, opened, img, background, 7)
+    assert dots is None  # the yellow ones came back for their hue
     assert cv2.connectedComponents(kept)[0] - 1 == 6
     assert kept[200, 150:391:60].all() and not kept[400, 150:183:8].any()
     np.testing.assert_array_equal(kept[fg == 0], 0)  # nothing beyond the bodies
@@ -73,7 +74,10 @@ def test_a_lone_grey_dot_comes_back_and_a_line_s_pieces_do_not() -> None:
     cv2.circle(fg, (60, 200), 3, 255, -1)
     cv2.circle(img, (60, 200), 3, (60, 60, 60), -1)  # 67 % less: opaque, a speck of dust
     opened = open_thin_lines(fg, 7)
-    kept = with_erased_colonies(fg, opened, img, np.full_like(img, agar), 7)
+    kept, dots = with_erased_colonies(fg, opened, img, np.full_like(img, agar), 7)
     assert kept[60, 60] == 255 and kept[200, 60] == 0
+    assert dots is not None
+    assert dots[60, 60] == 255  # the lone dot, and nothing else
+    assert cv2.countNonZero(dots) == cv2.countNonZero(fg[50:71, 50:71])
     assert not kept[150, 100:300].any()
     assert kept[250, 328] == 0 and kept[250, 300] == 255

@@ -148,11 +148,12 @@ def stages(plates: list) -> list[tuple]:
             img, PlateParams(drop_at_border=True)
         )
         roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
-        contours, d_alpha, inside, _, rejected, fg = plate_objects.objects_by_segmentation(
+        found = plate_objects.objects_by_segmentation(
             roi, usable, params, plate_objects.agar_background(roi, usable, params)
         )
-        des_shape = np.asarray(inside, bool) & (d_alpha < params.des_threshold_deg)
-        bodies = plate_bodies.measure_bodies(contours, fg, des_shape, params, rejected)
+        contours, fg = found.contours, found.foreground
+        des_shape = found.inside & (found.d_alpha < params.des_threshold_deg)
+        bodies = plate_bodies.measure_bodies(contours, fg, des_shape, params, found.rejected)
         out.append((roi, contours, fg, des_shape, bodies, params))
     return out
 
