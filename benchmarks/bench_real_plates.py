@@ -9,7 +9,10 @@ Two sets, scored as ``realplates/README.md`` says:
   matched / truth colonies, F1 from both, summed over all plates. ``1399.jpg`` has no labels
   and is left out. Picking: of the colonies classed ``authentic`` (the ones offered for
   picking), how many hold the centres of two or more truth boxes inside their contour (a pick
-  would take a mix) and how many hold none (not a boxed colony).
+  would take a mix) and how many hold none (not a boxed colony). The boxes not matched are
+  given by cause, with the plates that have most: the dish was not found, the centre lies
+  beyond the dish found, inside a body counted short, or in no reported body (by the box's
+  size: 4 mm and over, 2-4 mm, under 2 mm).
 * ``phone-counts``: phone photographs counted by hand; the count error of a plate is
   ``|colonies_estimate - truth| / truth``.
 
@@ -29,7 +32,8 @@ import argparse
 import csv
 import sys
 import time
-from dataclasses import dataclass
+from collections import Counter
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -51,6 +55,7 @@ class BoxScore:
     offered: int = 0  # colonies classed authentic
     offered_multi: int = 0  # of them, holding two or more truth centres
     offered_empty: int = 0  # of them, holding none
+    missed: dict[str, int] = field(default_factory=dict)  # unmatched truth boxes by cause
 
 
 def read_boxes(label_file: Path, width: int, height: int) -> np.ndarray:
@@ -105,7 +110,39 @@ def score_boxes(result: PlateResult, boxes: np.ndarray, tolerance_px: float = 2.
         len(offered),
         int(np.sum(offered >= 2)),
         int(np.sum(offered == 0)),
+        missed_causes(result, boxes, ~taken),
     )
+
+
+MISSED = (
+    "plate not analysed",
+    "beyond the dish found",
+    "inside a body counted short",
+    "in no body, 4 mm and over",
+    "in no body, 2-4 mm",
+    "in no body, under 2 mm",
+)
+
+
+def missed_causes(result: PlateResult, boxes: np.ndarray, missed: np.ndarray) -> dict[str, int]:
+    """The unmatched truth boxes (``missed``) by cause (``MISSED[1:]``): where the box's centre
+    lies, and for one in no reported body, the box's size (the root of its area) in mm at the
+    scale read from the dish found."""
+    (cx, cy), r = result.dish.center, result.dish.radius
+    px_per_mm = 2.0 * r / PlateParams().dish_diameter_mm
+    contours = [np.asarray(c.contour, np.float32).reshape(-1, 1, 2) for c in result.colonies]
+    causes: Counter[str] = Counter()
+    for x0, y0, x1, y1 in boxes[missed]:
+        x, y = (x0 + x1) / 2, (y0 + y1) / 2
+        size_mm = float(np.sqrt((x1 - x0) * (y1 - y0))) / px_per_mm
+        if np.hypot(x - cx, y - cy) > r:
+            cause = MISSED[1]
+        elif any(cv2.pointPolygonTest(c, (float(x), float(y)), False) >= 0 for c in contours):
+            cause = MISSED[2]
+        else:
+            cause = MISSED[3] if size_mm >= 4.0 else MISSED[4] if size_mm >= 2.0 else MISSED[5]
+        causes[cause] += 1
+    return dict(causes)
 
 
 def _f1(p: float, r: float) -> float:
@@ -151,6 +188,7 @@ def run_agar_boxes(
     print("-" * len(header))
     totals = [0, 0, 0, 0, 0, 0]
     errors, times = [], []
+    missed: dict[str, Counter[str]] = {cause: Counter() for cause in MISSED}
     for image_path in sorted((folder / "images").glob("*.jpg"), key=lambda p: int(p.stem)):
         label = folder / "labels" / f"{image_path.stem}.txt"
         if not label.exists() or (only and image_path.stem not in only):
@@ -159,13 +197,18 @@ def run_agar_boxes(
         result, ms, why = _analyze(image, params)
         h, w = image.shape[:2]
         boxes = read_boxes(label, w, h)
-        score = BoxScore(0, len(boxes), 0) if result is None else score_boxes(result, boxes)
+        if result is None:
+            score = BoxScore(0, len(boxes), 0, missed={MISSED[0]: len(boxes)})
+        else:
+            score = score_boxes(result, boxes)
         err = abs(score.reported - score.truth) / score.truth
         errors.append(err)
         times.append(ms)
         row = (score.reported, score.truth, score.matched)
         for i, v in enumerate((*row, score.offered, score.offered_multi, score.offered_empty)):
             totals[i] += v
+        for cause, n in score.missed.items():
+            missed[cause][image_path.stem] += n
         p = score.matched / score.reported if score.reported else 0.0
         r = score.matched / score.truth
         print(
@@ -186,6 +229,11 @@ def run_agar_boxes(
         f"picking: {offered} colonies offered (authentic), {multi} holding two or more boxed "
         f"colonies, {empty} holding none"
     )
+    print(f"not matched: {truth - matched} boxed colonies")
+    for cause, plates in missed.items():
+        if plates:
+            worst = ", ".join(f"{stem} {n}" for stem, n in plates.most_common(6))
+            print(f"  {cause}: {sum(plates.values())} ({worst})")
     return summary
 
 

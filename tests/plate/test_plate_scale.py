@@ -127,6 +127,8 @@ def test_real_agar_plate_when_the_data_are_present() -> None:
     score = score_boxes(analyze_plate(image), boxes)
     assert score.truth == 99
     assert score.matched >= 80 and score.reported <= 110
+    # every box not matched has its cause (where its centre lies, how large it is)
+    assert sum(score.missed.values()) == score.truth - score.matched
 
 
 def test_a_dish_cut_by_the_frame_is_named_or_analysed_whole_when_configured() -> None:
