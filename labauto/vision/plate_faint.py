@@ -145,8 +145,8 @@ def faint_bodies(
     cell = max(round(_CELL_MM * ppm), 1)
     cells = cv2.resize(seen, (max(sw // cell, 1), max(sh // cell, 1)), interpolation=cv2.INTER_AREA)
     window = min(_MEDIAN_CELLS, 2 * ((min(cells.shape[:2]) - 1) // 2) + 1)
-    median = cv2.medianBlur(cells, window) if window > 1 else cells
-    background = cv2.resize(median, (sw, sh), interpolation=cv2.INTER_LINEAR)
+    cell_medians = cv2.medianBlur(cells, window) if window > 1 else cells
+    background = cv2.resize(cell_medians, (sw, sh), interpolation=cv2.INTER_LINEAR)
     diff = cv2.GaussianBlur(cv2.subtract(img, background, dtype=cv2.CV_32F), (0, 0), sigma_mm * ppm)
 
     # the agar farther than margin_mm from its border (a distance transform: a wide erosion's
