@@ -11,11 +11,12 @@ Pipeline and the choices it makes where the paper leaves room:
    dish found (its diameter is ``dish_diameter_mm``) or a calibrated ``px_per_mm``; images finer
    than ``analysis_px_per_mm`` are analysed on a resampled copy and the results mapped back
    (:mod:`labauto.vision.plate_scale`). Below, "px" means pixels of that working copy.
-1. **Dish.** :func:`labauto.vision.dish.find_dish`: a Hough circle on a subsampled grey image,
-   refined along rays where the colour leaves the agar's for about a millimetre and does not come
-   back (the meniscus or the wall, not a line of the lid with agar beyond it), with a robust
-   circle fit. It reads 0.2-2.3 px short of the
-   drawn agar edge on the synthetic plates. A dish with over a quarter of its rim outside the
+1. **Dish.** :func:`labauto.vision.dish.find_dish`: a Hough circle on a subsampled grey image
+   as a first guess, moved to the dish's strongest circular edge (the same whatever the guess),
+   then refined along rays where the colour leaves the agar's for about a millimetre and does
+   not come back (the meniscus or the wall, not a line of the lid with agar beyond it), with a
+   robust circle fit. On 24 synthetic plates its radius is 1.9 px short to 1.4 px long of the
+   drawn agar edge, its centre within 1.9 px. A dish with over a quarter of its rim outside the
    image is refused (``detect_dish=False`` analyses the whole image). The usable area is the
    dish shrunk by ``rim_margin_mm`` (negative grows it), or a configured circle
    (``PlateParams.region``, also shrunk) or polygon (used as is). Bodies touching the usable
@@ -47,11 +48,13 @@ Pipeline and the choices it makes where the paper leaves room:
    ``sqrt(l1 / l2)`` of the second moments above ``max_elongation`` (glare streaks, straight
    strokes; the paper's DES limit is about 1:4); area above ``max_fill_ratio`` times the largest
    inscribed disc (curved or closed pen writing), unless it is as wide as the plate's colonies
-   (``chain_ratio``: a chain of colonies along a streak, counted as a merged body); printed or
-   written ink (black or blue, stroke-shaped, dot-sized or dotted:
-   :mod:`labauto.vision.plate_ink`). The body's mask is its filled
-   contour restricted to the foreground (a loop of ink is not solid) and closed with a 5x5 disc;
-   holes under a tenth of it are filled (translucent centres, ``plate_bodies.HOLE_SHARE``).
+   (``chain_ratio``: a chain of colonies along a streak, counted as a merged body); arcs
+   along the rim, pieces of the lid's and the wall's ring lines (never a chain:
+   :mod:`labauto.vision.plate_rim_arcs`); printed or written ink (black or blue,
+   stroke-shaped, dot-sized or dotted: :mod:`labauto.vision.plate_ink`). The body's mask is
+   its filled contour restricted to the foreground (a loop of ink is not solid) and closed
+   with a 5x5 disc; holes under a tenth of it are filled (translucent centres,
+   ``plate_bodies.HOLE_SHARE``).
 4. **Classes.** Authentic: a DES, i.e. centroid inside and D_alpha (median by default) below
    ``des_threshold_deg``, and no waist: the deepest concavity (distance from the convex hull) is
    below ``max_concavity`` times the inscribed radius. D_alpha alone does not separate a merged
@@ -120,6 +123,7 @@ from labauto.vision.plate_objects import (
 )
 from labauto.vision.plate_params import PlateParams
 from labauto.vision.plate_result import Colony, PlateResult
+from labauto.vision.plate_rim_arcs import rim_arcs
 
 __all__ = [
     "Colony",
@@ -194,8 +198,14 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     # doubtful object (a lone dot the opening had erased) is counted, never offered: no DES
     des_shape = objects.inside & (d_alpha < params.des_threshold_deg) & ~objects.doubtful
     bodies = measure_bodies(contours, fg, des_shape, params, rejected)
-    stroke_shaped = bodies.stroke.copy()
     ppm = float(params.px_per_mm or 0.0)
+    arc = np.zeros(len(bodies.index), bool)
+    if rim is not None:  # pieces of the lid's and the wall's ring lines: never a chain
+        arc = rim_arcs(contours, bodies.index, bodies.area, rim, ppm)
+        if (arc & ~bodies.stroke).any():
+            rejected["rim_arc"] = int((arc & ~bodies.stroke).sum())
+        bodies.stroke |= arc
+    stroke_shaped = bodies.stroke & ~arc
     # a single colony's shape: a DES outline, no waist, round
     single = des_shape[bodies.index] & (bodies.concavity < params.max_concavity)
     single &= bodies.elongation <= params.max_authentic_elongation
