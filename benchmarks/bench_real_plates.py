@@ -19,11 +19,12 @@ Two sets, scored as ``realplates/README.md`` says:
 For both sets the table gives every plate and the totals: median count error over the plates and
 how many are over 15 %. The images are read by ``cv2.imread`` (EXIF orientation applied). Run:
 ``python benchmarks/bench_real_plates.py [--data DIR] [--set agar-boxes|phone-counts] [--only ID
-...] [--camera-scale PX_PER_MM]``; ``--camera-scale`` first resamples every photo (area averaging,
-or bilinear up) so that its dish is at that scale, as a webcam would see it. The data are
-development data, not part of labauto; without them the script says where it looked and stops (exit
-status 2 when ``--data`` named the folder, 0 when the default place is simply absent, so ``make
-bench`` goes on).
+...] [--camera-scale PX_PER_MM] [--param NAME=VALUE ...]``. ``--camera-scale`` first resamples
+every photo (area averaging, or bilinear up) so that its dish is at that scale, as a webcam would
+see it; ``--param`` sets a ``PlateParams`` field for the run (its value read as YAML), to measure
+a change of a default. The data are development data, not part of labauto; without them the
+script says where it looked and stops (exit status 2 when ``--data`` named the folder, 0 when the
+default place is simply absent, so ``make bench`` goes on).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import yaml
 
 from labauto.vision.dish import find_dish
 from labauto.vision.plate import PlateParams, PlateResult, analyze_plate
@@ -286,6 +288,19 @@ def run_phone_counts(
     return summary
 
 
+def plate_params(settings: list[str]) -> PlateParams | None:
+    """``PlateParams`` with the ``NAME=VALUE`` settings (values read as YAML); None for none."""
+    if not settings:
+        return None
+    fields = {}
+    for setting in settings:
+        name, sep, value = setting.partition("=")
+        if not sep or not name:
+            raise ValueError(f"--param takes NAME=VALUE, got {setting!r}")
+        fields[name.strip()] = yaml.safe_load(value)
+    return PlateParams(**fields)
+
+
 def main() -> int:
     """Score the sets found under ``--data``."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -299,7 +314,18 @@ def main() -> int:
         metavar="PX_PER_MM",
         help="resample every photo so that its dish is at this scale (a webcam: 4-8)",
     )
+    ap.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a PlateParams field to set (a YAML value), e.g. --param rim_margin_mm=0",
+    )
     args = ap.parse_args()
+    try:
+        params = plate_params(args.param)
+    except (TypeError, ValueError) as exc:
+        ap.error(str(exc))
     sets = args.set or ["agar-boxes", "phone-counts"]
     data = args.data or DEFAULT_DATA
     missing = [s for s in sets if not (data / s).is_dir()]
@@ -314,9 +340,9 @@ def main() -> int:
     only = set(args.only)
     for name in sets:
         if name == "agar-boxes":
-            run_agar_boxes(args.data / name, only, None, args.camera_scale)
+            run_agar_boxes(args.data / name, only, params, args.camera_scale)
         else:
-            run_phone_counts(args.data / name, only, None, args.camera_scale)
+            run_phone_counts(args.data / name, only, params, args.camera_scale)
         print()
     return 0
 

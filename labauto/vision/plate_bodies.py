@@ -23,6 +23,7 @@ MIN_SINGLES = 3  # single colonies a plate needs before their median area is a y
 _DISC5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
 SPOT_MM = 0.4  # a second colony on a colony: a round spot of outliers at least this wide ...
 SPOT_ROUNDNESS = 0.7  # ... both ways, filling this share of the ellipse in its bounding box
+LARGE_BODY_RATIO = 1.5  # a body this many times as wide as the plate's single colonies is large
 _GAP = 2  # empty canvas rows between two bodies' crops (the 5x5 filters reach 2 px)
 
 
@@ -225,9 +226,9 @@ def mix_scores(
     second row and column of the body's crop is used (a speckle of 2 px radius still gives
     samples).
 
-    Also returned: whether a body's outliers hold a round spot (one connected piece at least
-    ``SPOT_MM`` across both ways, filling ``SPOT_ROUNDNESS`` of the ellipse inscribed in its
-    bounding box): a small colony sitting on a large one, too small a share of it for the
+    Also returned: how many round spots a body's outliers hold (connected pieces at least
+    ``SPOT_MM`` across both ways, filling ``SPOT_ROUNDNESS`` of the ellipse inscribed in their
+    bounding box): small colonies sitting on a large one, too small a share of it for the
     score. Measured on the colonies offered for picking on the AGAR photographs (their
     outliers at the photo's own resolution): the three that held a small boxed colony on a
     large one had spots 0.61-0.84 mm across filling 0.92-0.96 of their enclosing circle; the
@@ -280,7 +281,7 @@ def mix_scores(
     off = np.einsum("ij,ij->i", resid, resid) > params.mix_residual**2
     score = np.bincount(label, off, minlength=k) / np.maximum(sizes, 1)
     score[sizes < 8] = 0.0  # too few inner samples to judge
-    spots = np.zeros(k, bool)
+    spots = np.zeros(k, np.intp)
     spot_px = SPOT_MM * float(params.px_per_mm or 0.0) / 2  # on the grid of every second pixel
     if spot_px > 0 and off.any():
         spots = _round_spots(off, sub_y, sub_x, dt.shape, body_of_row, spot_px, k)
@@ -296,8 +297,8 @@ def _round_spots(
     spot_px: float,
     k: int,
 ) -> np.ndarray:
-    """True for the bodies whose outlier samples (``off`` at ``sub_y, sub_x`` on the
-    half-resolution canvas of ``shape``) hold a round spot at least ``spot_px`` across."""
+    """How many round spots at least ``spot_px`` across each body's outlier samples (``off``
+    at ``sub_y, sub_x`` on the half-resolution canvas of ``shape``) hold."""
     canvas = np.zeros(shape, np.uint8)
     canvas[sub_y[off], sub_x[off]] = 1
     _, _, stats, _ = cv2.connectedComponentsWithStats(canvas, connectivity=8)
@@ -305,9 +306,8 @@ def _round_spots(
     width, height = stats[1:, cv2.CC_STAT_WIDTH], stats[1:, cv2.CC_STAT_HEIGHT]
     ellipse = math.pi / 4 * width * height  # the ellipse inscribed in the spot's box
     spot = (np.minimum(width, height) >= spot_px) & (area >= SPOT_ROUNDNESS * ellipse)
-    found = np.zeros(k, bool)
-    found[body_of_row[stats[1:, cv2.CC_STAT_TOP][spot]]] = True  # no canvas row holds two
-    return found
+    # no canvas row holds two bodies: a spot's top row names its body
+    return np.bincount(body_of_row[stats[1:, cv2.CC_STAT_TOP][spot]], minlength=k)
 
 
 def merged_counts(

@@ -200,6 +200,26 @@ def test_a_small_colony_on_a_large_one_is_mixed(
     assert spotted.mix_score < 0.06  # the fraction alone would offer it
 
 
+@pytest.mark.parametrize("large_ratio", [plate_bodies.LARGE_BODY_RATIO, math.inf])
+def test_small_colonies_on_a_large_one_are_counted(
+    monkeypatch: pytest.MonkeyPatch, large_ratio: float
+) -> None:
+    # two pale colonies 0.8 mm across on an irregular colony 9 mm across (a disc with a lobe:
+    # no DES, one peak), beside three single colonies 3 mm across: the large body holds three
+    # colonies. A colony as large with no spot on it counts one.
+    monkeypatch.setattr("labauto.vision.plate.LARGE_BODY_RATIO", large_ratio)
+    singles = [(100, 120, 15), (100, 480, 15), (500, 480, 15)]
+    img = _agar_with([*singles, (300.0, 250.0, 45.0), (335.0, 220.0, 20.0), (470.0, 330.0, 45.0)])
+    pale = (150, 200, 230)
+    for spot in ((280, 240), (310, 280)):
+        cv2.circle(img, spot, 4, pale, -1, cv2.LINE_AA)
+    spotted = min(_analyse(img), key=lambda c: math.dist(c.centroid, (305, 245)))
+    plain = min(_analyse(img), key=lambda c: math.dist(c.centroid, (470, 330)))
+    assert spotted.klass == "merged"
+    assert spotted.estimated_count == (3 if math.isfinite(large_ratio) else 1)
+    assert plain.estimated_count == 1
+
+
 def test_a_lone_grey_dot_the_opening_erased_is_counted_but_not_offered() -> None:
     # 0.5 mm across, 20 grey levels darker in every channel (no hue, lets 88 % of the light
     # through): narrower than the 0.75 mm opening, it comes back as a lone dot, a doubtful
