@@ -34,12 +34,13 @@ import csv
 import sys
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 import yaml
+from photo_perturb import Perturbation, parse
 
 from labauto.vision.dish import find_dish
 from labauto.vision.plate import PlateParams, PlateResult, analyze_plate
@@ -58,6 +59,16 @@ class BoxScore:
     offered_multi: int = 0  # of them, holding two or more truth centres
     offered_empty: int = 0  # of them, holding none
     missed: dict[str, int] = field(default_factory=dict)  # unmatched truth boxes by cause
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How the photos are analysed: ``params`` (None: the defaults), resampled to
+    ``camera_scale`` px/mm first when given, and changed by ``perturb`` when given."""
+
+    params: PlateParams | None = None
+    camera_scale: float | None = None
+    perturb: Perturbation | None = None
 
 
 def read_boxes(label_file: Path, width: int, height: int) -> np.ndarray:
@@ -151,19 +162,22 @@ def _f1(p: float, r: float) -> float:
     return 2 * p * r / (p + r) if p + r > 0 else 0.0
 
 
-def _read(path: Path, camera_scale: float | None) -> np.ndarray | None:
-    """The photo, resampled so that its dish is at ``camera_scale`` px/mm when one is given."""
+def _read(path: Path, options: RunOptions) -> np.ndarray | None:
+    """The photo, resampled so that its dish is at ``options.camera_scale`` px/mm when one is
+    given, then perturbed by ``options.perturb``."""
     image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None or not camera_scale:
-        return image
-    try:
-        px_per_mm = 2.0 * find_dish(image).radius / PlateParams().dish_diameter_mm
-    except ValueError:
-        return image  # no dish: the analysis reports it
-    f = camera_scale / px_per_mm
-    return cv2.resize(
-        image, None, fx=f, fy=f, interpolation=cv2.INTER_AREA if f < 1 else cv2.INTER_LINEAR
-    )
+    if image is None:
+        return None
+    if options.camera_scale:
+        try:
+            px_per_mm = 2.0 * find_dish(image).radius / PlateParams().dish_diameter_mm
+        except ValueError:
+            px_per_mm = 0.0  # no dish: the analysis reports it
+        if px_per_mm > 0:
+            f = options.camera_scale / px_per_mm
+            interpolation = cv2.INTER_AREA if f < 1 else cv2.INTER_LINEAR
+            image = cv2.resize(image, None, fx=f, fy=f, interpolation=interpolation)
+    return image if options.perturb is None else options.perturb.image(image)
 
 
 def _analyze(
@@ -179,9 +193,7 @@ def _analyze(
     return result, (time.perf_counter() - t0) * 1000, ""
 
 
-def run_agar_boxes(
-    folder: Path, only: set[str], params: PlateParams | None, camera_scale: float | None = None
-) -> dict[str, float]:
+def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[str, float]:
     """Score the agar-boxes set; print one row per plate and the totals."""
     print(f"agar-boxes ({folder})")
     header = f"{'plate':>8s} {'size':>10s} {'truth':>6s} {'found':>6s} {'matched':>8s} "
@@ -195,10 +207,13 @@ def run_agar_boxes(
         label = folder / "labels" / f"{image_path.stem}.txt"
         if not label.exists() or (only and image_path.stem not in only):
             continue
-        image = _read(image_path, camera_scale)
-        result, ms, why = _analyze(image, params)
+        image = _read(image_path, replace(options, perturb=None))
         h, w = image.shape[:2]
         boxes = read_boxes(label, w, h)
+        if options.perturb is not None:
+            image = options.perturb.image(image)
+            boxes = options.perturb.boxes(boxes, w, h)
+        result, ms, why = _analyze(image, options.params)
         if result is None:
             score = BoxScore(0, len(boxes), 0, missed={MISSED[0]: len(boxes)})
         else:
@@ -255,9 +270,7 @@ def _count_line(summary: dict[str, float]) -> str:
     )
 
 
-def run_phone_counts(
-    folder: Path, only: set[str], params: PlateParams | None, camera_scale: float | None = None
-) -> dict[str, float]:
+def run_phone_counts(folder: Path, only: set[str], options: RunOptions) -> dict[str, float]:
     """Score the phone-counts set; print one row per plate and the totals."""
     print(f"phone-counts ({folder})")
     header = f"{'plate':>9s} {'size':>10s} {'truth':>6s} {'found':>6s} {'count err':>9s} {'ms':>7s}"
@@ -271,7 +284,7 @@ def run_phone_counts(
         if only and stem not in only:
             continue
         truth = int(row["human_count_total_CFU"])
-        result, ms, why = _analyze(_read(folder / "images" / row["image"], camera_scale), params)
+        result, ms, why = _analyze(_read(folder / "images" / row["image"], options), options.params)
         found = result.counts["colonies_estimate"] if result is not None else 0
         err = abs(found - truth) / truth
         errors.append(err)
@@ -321,9 +334,19 @@ def main() -> int:
         metavar="NAME=VALUE",
         help="a PlateParams field to set (a YAML value), e.g. --param rim_margin_mm=0",
     )
+    ap.add_argument(
+        "--perturb",
+        default=None,
+        metavar="NAME[:VALUE]",
+        help="change every photo first: rot90, flip, gain:K, gamma:G, wb:B,G,R, jpeg:Q, noise:S",
+    )
     args = ap.parse_args()
     try:
-        params = plate_params(args.param)
+        options = RunOptions(
+            plate_params(args.param),
+            args.camera_scale,
+            parse(args.perturb) if args.perturb else None,
+        )
     except (TypeError, ValueError) as exc:
         ap.error(str(exc))
     sets = args.set or ["agar-boxes", "phone-counts"]
@@ -340,9 +363,9 @@ def main() -> int:
     only = set(args.only)
     for name in sets:
         if name == "agar-boxes":
-            run_agar_boxes(args.data / name, only, params, args.camera_scale)
+            run_agar_boxes(args.data / name, only, options)
         else:
-            run_phone_counts(args.data / name, only, params, args.camera_scale)
+            run_phone_counts(args.data / name, only, options)
         print()
     return 0
 
