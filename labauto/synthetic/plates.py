@@ -1074,19 +1074,23 @@ class PlateScore:
     confusion: dict[tuple[str, str], int]
 
 
-def score_plate(truth: PlateTruth, colonies: list[Any]) -> PlateScore:
+def score_plate(truth: PlateTruth, colonies: list[Any], scale: float = 1.0) -> PlateScore:
     """Match reported colonies to the truth and count what was found and classified right.
 
     A reported colony (anything with ``centroid``, ``klass`` and ``estimated_count``) matches
     the truth colony whose outline contains its centroid, or, failing that, the nearest truth
     centre within half the truth's equivalent radius; each truth colony is matched at most once.
+    ``scale``: the colonies were reported on the plate resampled by this factor (as
+    ``cv2.resize(image, None, fx=scale, fy=scale)``); their centroids are mapped back first.
     """
     polys = [c.contour.astype(np.float32).reshape(-1, 1, 2) for c in truth.colonies]
     used: set[int] = set()
     found = correct = count_ok = merged_found = fp = art = 0
     confusion: dict[tuple[str, str], int] = {}
     for col in colonies:
-        x, y = float(col.centroid[0]), float(col.centroid[1])
+        # pixel centres: x in the resampled image is at (x + 0.5) / scale - 0.5 in the plate's
+        x = (float(col.centroid[0]) + 0.5) / scale - 0.5
+        y = (float(col.centroid[1]) + 0.5) / scale - 0.5
         match = None
         for i, (tc, poly) in enumerate(zip(truth.colonies, polys, strict=True)):
             if i in used:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from photo_perturb import parse  # noqa: E402
+from photo_perturb import parse
 
 
 @pytest.mark.parametrize("spec", ["rot90", "flip"])
