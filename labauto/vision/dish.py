@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from labauto.vision.image import as_image
+from labauto.vision.median import median
 
 _DISH_EDGE_CONTRAST = 18.0  # colour distance (grey levels) from the agar that marks its edge
 _LINE_MM = 4.0  # a departure followed within this by ...
@@ -231,13 +232,16 @@ def _strongest_edge(
     map_y = (cy + np.sin(theta)[:, None] * radii[None, :]).astype(np.float32)
     prof = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     half = max(round(_STEP_MM * r / 45.0 / step), 1)  # r / 45: px per mm of a 90 mm dish
-    sums = np.cumsum(np.pad(prof.astype(np.float32), ((0, 0), (1, 0), (0, 0))), axis=1)
-    at = np.arange(half, radii.size - half)
-    change = (sums[:, at + half] - 2.0 * sums[:, at] + sums[:, at - half]) / half
+    n = radii.size
+    # at the samples half .. n - half - 1: the sum of the next `half` samples minus the sum of
+    # the last `half` (exact: integers in float32), over `half`
+    step_kernel = np.repeat(np.array([[-1.0, 1.0]], np.float32), half, axis=1)
+    sums = cv2.filter2D(prof.astype(np.float32), -1, step_kernel, anchor=(half, 0))
+    change = sums[:, half : n - half] / half
     strength = np.sqrt(np.einsum("ijk,ijk->ij", change, change))
     seen = (map_x >= 0) & (map_x <= w - 1) & (map_y >= 0) & (map_y <= h - 1)
-    strength[~seen[:, at]] = 0.0
-    rr = radii[at[np.argmax(strength, axis=1)]]
+    strength[~seen[:, half : n - half]] = 0.0
+    rr = radii[half + np.argmax(strength, axis=1)]
     return _robust_circle(cx + np.cos(theta) * rr, cy + np.sin(theta) * rr, (cx, cy, r))
 
 
@@ -253,7 +257,7 @@ def _robust_circle(
     for _ in range(3):
         fit = _fit_circle(px[keep], py[keep])
         res = np.abs(np.hypot(px - fit[0], py - fit[1]) - fit[2])
-        mad = np.median(res[keep])
+        mad = median(res[keep])
         new_keep = res <= max(3.0 * 1.4826 * mad, 1.0)
         if new_keep.sum() < 12:
             break
