@@ -33,8 +33,10 @@ class Colony:
     d_alpha_median : float
         Median shape angle D_alpha in degrees.
     estimated_count : int
-        Colonies in the body (1 for authentic and mixed; for merged, the peaks of its distance
-        transform: 1 when it is one colony whose shape is not a DES).
+        Colonies in the body: 1 for authentic; for merged, the peaks of its distance transform
+        (1 when it is one colony whose shape is not a DES); for a merged or mixed body 1.5 times
+        as wide as the plate's single colonies, one more for every small colony seen sitting
+        on it (:mod:`labauto.vision.plate`, step 5).
     contour : ndarray, shape (n, 2)
         Outline ``(x, y)`` in image pixels.
     mix_score : float
