@@ -260,7 +260,7 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     large &= bodies.r_in >= LARGE_BODY_RATIO * single_r_in
     mix, spots = mix_scores(roi, bodies, des | large, params)
     counts = np.where(large, counts + spots, counts)
-    spotted = spots > 0
+    mix, spotted = np.where(des, mix, 0.0), spots > 0  # the mixed score is a DES's alone
 
     colonies: list[Colony] = []
     for b, k in enumerate(bodies.index.tolist()):

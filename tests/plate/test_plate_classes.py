@@ -217,6 +217,7 @@ def test_small_colonies_on_a_large_one_are_counted(
     plain = min(_analyse(img), key=lambda c: math.dist(c.centroid, (470, 330)))
     assert spotted.klass == "merged"
     assert spotted.estimated_count == (3 if math.isfinite(large_ratio) else 1)
+    assert spotted.mix_score == 0.0  # the mixed score is a DES's alone
     assert plain.estimated_count == 1
 
 
