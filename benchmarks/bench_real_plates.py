@@ -12,7 +12,8 @@ Two sets, scored as ``realplates/README.md`` says:
   would take a mix) and how many hold none (not a boxed colony). The boxes not matched are
   given by cause, with the plates that have most: the dish was not found, the centre lies
   beyond the dish found, inside a body counted short, or in no reported body (by the box's
-  size: 4 mm and over, 2-4 mm, under 2 mm).
+  size: 4 mm and over, 2-4 mm, under 2 mm); and the recall by how far inside the dish's edge
+  the boxes lie (within 2 mm, 2-4 mm, farther): the colonies at the meniscus.
 * ``phone-counts``: phone photographs counted by hand; the count error of a plate is
   ``|colonies_estimate - truth| / truth``. Six plates carry a note that smaller colonies were
   not counted (their truth is short by an unknown amount): the totals are given over all
@@ -33,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import math
 import sys
 import time
 from collections import Counter
@@ -61,6 +63,8 @@ class BoxScore:
     offered_multi: int = 0  # of them, holding two or more truth centres
     offered_empty: int = 0  # of them, holding none
     missed: dict[str, int] = field(default_factory=dict)  # unmatched truth boxes by cause
+    # truth boxes and those matched, by how far their centre lies inside the dish's edge
+    by_edge: dict[str, tuple[int, int]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -126,6 +130,7 @@ def score_boxes(result: PlateResult, boxes: np.ndarray, tolerance_px: float = 2.
         int(np.sum(offered >= 2)),
         int(np.sum(offered == 0)),
         missed_causes(result, boxes, ~taken),
+        recall_by_edge(result, boxes, taken),
     )
 
 
@@ -137,6 +142,28 @@ MISSED = (
     "in no body, 2-4 mm",
     "in no body, under 2 mm",
 )
+
+
+EDGE_BANDS = ((2.0, "within 2 mm"), (4.0, "2-4 mm"), (math.inf, "farther"))
+
+
+def recall_by_edge(
+    result: PlateResult, boxes: np.ndarray, matched: np.ndarray
+) -> dict[str, tuple[int, int]]:
+    """``(truth boxes, matched)`` by how far inside the dish's edge found a box's centre lies
+    (``EDGE_BANDS``, in mm at the scale read from the dish; beyond the edge counts as within
+    2 mm): colonies at the meniscus are the rim model's and the usable area's business."""
+    (cx, cy), r = result.dish.center, result.dish.radius
+    px_per_mm = 2.0 * r / PlateParams().dish_diameter_mm
+    inside_mm = (
+        r - np.hypot((boxes[:, 0] + boxes[:, 2]) / 2 - cx, (boxes[:, 1] + boxes[:, 3]) / 2 - cy)
+    ) / px_per_mm
+    band = np.searchsorted([limit for limit, _ in EDGE_BANDS], inside_mm, side="right")
+    band = np.minimum(band, len(EDGE_BANDS) - 1)
+    return {
+        name: (int(np.sum(band == i)), int(np.sum(matched[band == i])))
+        for i, (_, name) in enumerate(EDGE_BANDS)
+    }
 
 
 def missed_causes(result: PlateResult, boxes: np.ndarray, missed: np.ndarray) -> dict[str, int]:
@@ -205,6 +232,7 @@ def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[st
     totals = [0, 0, 0, 0, 0, 0]
     errors, times = [], []
     missed: dict[str, Counter[str]] = {cause: Counter() for cause in MISSED}
+    by_edge: dict[str, list[int]] = {name: [0, 0] for _, name in EDGE_BANDS}
     for image_path in sorted((folder / "images").glob("*.jpg"), key=lambda p: int(p.stem)):
         label = folder / "labels" / f"{image_path.stem}.txt"
         if not label.exists() or (only and image_path.stem not in only):
@@ -228,6 +256,9 @@ def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[st
             totals[i] += v
         for cause, n in score.missed.items():
             missed[cause][image_path.stem] += n
+        for name, (n_truth, n_matched) in score.by_edge.items():
+            by_edge[name][0] += n_truth
+            by_edge[name][1] += n_matched
         p = score.matched / score.reported if score.reported else 0.0
         r = score.matched / score.truth
         print(
@@ -253,6 +284,11 @@ def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[st
         if plates:
             worst = ", ".join(f"{stem} {n}" for stem, n in plates.most_common(6))
             print(f"  {cause}: {sum(plates.values())} ({worst})")
+    bands = ", ".join(
+        f"{name} {n_matched}/{n_truth} ({n_matched / max(n_truth, 1):.2f})"
+        for name, (n_truth, n_matched) in by_edge.items()
+    )
+    print(f"recall by distance inside the dish's edge: {bands}")
     return summary
 
 

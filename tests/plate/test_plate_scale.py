@@ -119,6 +119,11 @@ def test_real_agar_plate_when_the_data_are_present() -> None:
     assert score.matched >= 80 and score.reported <= 110
     # every box not matched has its cause (where its centre lies, how large it is)
     assert sum(score.missed.values()) == score.truth - score.matched
+    # and every box, matched or not, in one band of distance from the dish's edge
+    assert [sum(v) for v in zip(*score.by_edge.values(), strict=True)] == [
+        score.truth,
+        score.matched,
+    ]
 
 
 def test_a_dish_cut_by_the_frame_is_named_or_analysed_whole_when_configured() -> None:
