@@ -356,7 +356,10 @@ def plate_params(settings: list[str]) -> PlateParams | None:
         if not sep or not name:
             raise ValueError(f"--param takes NAME=VALUE, got {setting!r}")
         fields[name.strip()] = yaml.safe_load(value)
-    return PlateParams(**fields)
+    try:
+        return PlateParams(**fields)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"--param {' '.join(settings)}: {exc}") from None
 
 
 def main() -> int:
