@@ -38,7 +38,7 @@ import math
 import sys
 import time
 from collections import Counter
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -147,19 +147,26 @@ MISSED = (
 EDGE_BANDS = ((2.0, "within 2 mm"), (4.0, "2-4 mm"), (math.inf, "farther"))
 
 
+def _px_per_mm(result: PlateResult) -> float:
+    """The scale read from the dish found (its diameter is ``dish_diameter_mm``)."""
+    return 2.0 * result.dish.radius / PlateParams().dish_diameter_mm
+
+
+def _inside_edge_mm(result: PlateResult, boxes: np.ndarray) -> np.ndarray:
+    """How far inside the dish's edge found each box's centre lies, in mm (negative beyond)."""
+    (cx, cy), r = result.dish.center, result.dish.radius
+    x, y = (boxes[:, 0] + boxes[:, 2]) / 2, (boxes[:, 1] + boxes[:, 3]) / 2
+    return (r - np.hypot(x - cx, y - cy)) / _px_per_mm(result)
+
+
 def recall_by_edge(
     result: PlateResult, boxes: np.ndarray, matched: np.ndarray
 ) -> dict[str, tuple[int, int]]:
     """``(truth boxes, matched)`` by how far inside the dish's edge found a box's centre lies
-    (``EDGE_BANDS``, in mm at the scale read from the dish; beyond the edge counts as within
-    2 mm): colonies at the meniscus are the rim model's and the usable area's business."""
-    (cx, cy), r = result.dish.center, result.dish.radius
-    px_per_mm = 2.0 * r / PlateParams().dish_diameter_mm
-    inside_mm = (
-        r - np.hypot((boxes[:, 0] + boxes[:, 2]) / 2 - cx, (boxes[:, 1] + boxes[:, 3]) / 2 - cy)
-    ) / px_per_mm
-    band = np.searchsorted([limit for limit, _ in EDGE_BANDS], inside_mm, side="right")
-    band = np.minimum(band, len(EDGE_BANDS) - 1)
+    (``EDGE_BANDS``; beyond the edge counts as within 2 mm): colonies at the meniscus are the
+    rim model's and the usable area's business."""
+    limits = [limit for limit, _ in EDGE_BANDS]
+    band = np.searchsorted(limits, _inside_edge_mm(result, boxes), side="right")
     return {
         name: (int(np.sum(band == i)), int(np.sum(matched[band == i])))
         for i, (_, name) in enumerate(EDGE_BANDS)
@@ -170,14 +177,15 @@ def missed_causes(result: PlateResult, boxes: np.ndarray, missed: np.ndarray) ->
     """The unmatched truth boxes (``missed``) by cause (``MISSED[1:]``): where the box's centre
     lies, and for one in no reported body, the box's size (the root of its area) in mm at the
     scale read from the dish found."""
-    (cx, cy), r = result.dish.center, result.dish.radius
-    px_per_mm = 2.0 * r / PlateParams().dish_diameter_mm
+    px_per_mm = _px_per_mm(result)
     contours = [np.asarray(c.contour, np.float32).reshape(-1, 1, 2) for c in result.colonies]
     causes: Counter[str] = Counter()
-    for x0, y0, x1, y1 in boxes[missed]:
+    for (x0, y0, x1, y1), inside_mm in zip(
+        boxes[missed], _inside_edge_mm(result, boxes[missed]), strict=True
+    ):
         x, y = (x0 + x1) / 2, (y0 + y1) / 2
         size_mm = float(np.sqrt((x1 - x0) * (y1 - y0))) / px_per_mm
-        if np.hypot(x - cx, y - cy) > r:
+        if inside_mm < 0:
             cause = MISSED[1]
         elif any(cv2.pointPolygonTest(c, (float(x), float(y)), False) >= 0 for c in contours):
             cause = MISSED[2]
@@ -191,22 +199,19 @@ def _f1(p: float, r: float) -> float:
     return 2 * p * r / (p + r) if p + r > 0 else 0.0
 
 
-def _read(path: Path, options: RunOptions) -> np.ndarray | None:
-    """The photo, resampled so that its dish is at ``options.camera_scale`` px/mm when one is
-    given, then perturbed by ``options.perturb``."""
+def _read(path: Path, camera_scale: float | None) -> np.ndarray | None:
+    """The photo, resampled so that its dish is at ``camera_scale`` px/mm when one is given."""
     image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        return None
-    if options.camera_scale:
-        try:
-            px_per_mm = 2.0 * find_dish(image).radius / PlateParams().dish_diameter_mm
-        except ValueError:
-            px_per_mm = 0.0  # no dish: the analysis reports it
-        if px_per_mm > 0:
-            f = options.camera_scale / px_per_mm
-            interpolation = cv2.INTER_AREA if f < 1 else cv2.INTER_LINEAR
-            image = cv2.resize(image, None, fx=f, fy=f, interpolation=interpolation)
-    return image if options.perturb is None else options.perturb.image(image)
+    if image is None or not camera_scale:
+        return image
+    try:
+        px_per_mm = 2.0 * find_dish(image).radius / PlateParams().dish_diameter_mm
+    except ValueError:
+        return image  # no dish: the analysis reports it
+    f = camera_scale / px_per_mm
+    return cv2.resize(
+        image, None, fx=f, fy=f, interpolation=cv2.INTER_AREA if f < 1 else cv2.INTER_LINEAR
+    )
 
 
 def _analyze(
@@ -237,7 +242,7 @@ def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[st
         label = folder / "labels" / f"{image_path.stem}.txt"
         if not label.exists() or (only and image_path.stem not in only):
             continue
-        image = _read(image_path, replace(options, perturb=None))
+        image = _read(image_path, options.camera_scale)
         h, w = image.shape[:2]
         boxes = read_boxes(label, w, h)
         if options.perturb is not None:
@@ -322,7 +327,10 @@ def run_phone_counts(folder: Path, only: set[str], options: RunOptions) -> dict[
         if only and stem not in only:
             continue
         truth = int(row["human_count_total_CFU"])
-        result, ms, why = _analyze(_read(folder / "images" / row["image"], options), options.params)
+        image = _read(folder / "images" / row["image"], options.camera_scale)
+        if image is not None and options.perturb is not None:
+            image = options.perturb.image(image)
+        result, ms, why = _analyze(image, options.params)
         found = result.counts["colonies_estimate"] if result is not None else 0
         err = abs(found - truth) / truth
         errors.append(err)

@@ -90,7 +90,7 @@ def parse(spec: str) -> Perturbation:
         raise ValueError(
             f"--perturb {spec!r}: the value must be numbers, comma-separated"
         ) from None
-    wanted = 3 if name == "wb" else (0 if not DEFAULTS[name] else 1)
+    wanted = len(DEFAULTS[name].split(",")) if DEFAULTS[name] else 0  # as many as the default
     if len(values) != wanted:
         raise ValueError(f"--perturb {spec!r}: {name} takes {wanted} number(s)")
     return Perturbation(name, values)
