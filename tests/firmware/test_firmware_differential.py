@@ -114,7 +114,9 @@ SCRIPT: list[tuple[str, bytes, dict[str, float]]] = [
         {"quiet": 0.3},
     ),
     ("wait for it", b"G4 P0\n", {"quiet": 0.1, "at_least": 0.2}),
-    ("status while moving", b"?", {"quiet": 0.05}),
+    # quiet 0.3 s: a loaded host delays either peer's report by more than 0.05 s (seen in CI),
+    # and the move lasts 4 s, so both are still moving at the reset
+    ("status while moving", b"?", {"quiet": 0.3}),
     # grbl-sim prints the two in either order (its reset "interrupt" is a second host thread);
     # GRBL's code and the simulator say ALARM:3 first. Compared as a set.
     ("reset during the move: ALARM:3 and the wait's ok", b"\x18", {"at_least": 1.2, "sort": 1}),
@@ -122,7 +124,11 @@ SCRIPT: list[tuple[str, bytes, dict[str, float]]] = [
 ]
 
 
-def transcript(peer: Peer) -> list[tuple[str, list[str]]]:
+#: (step label, the lines it earned), in the order of :data:`SCRIPT`.
+Transcript = list[tuple[str, list[str]]]
+
+
+def transcript(peer: Peer) -> Transcript:
     """Run :data:`SCRIPT`, then the homing check, on ``peer``."""
     record = []
     for label, data, options in SCRIPT:
@@ -149,7 +155,7 @@ def wait_idle(peer: Peer) -> None:
         time.sleep(0.1)
 
 
-def simulator_transcript(result: list[list[tuple[str, list[str]]]]) -> None:
+def simulator_transcript(result: list[Transcript]) -> None:
     """The transcript of our simulated gantry, set up like the firmware's test settings."""
     with SimulatedGantry(
         SPACE,
@@ -166,8 +172,9 @@ def simulator_transcript(result: list[list[tuple[str, list[str]]]]) -> None:
             peer.close()
 
 
-def test_simulator_answers_like_the_firmware(grbl_sim_exe: Path, eeprom: Path) -> None:
-    ours: list[list[tuple[str, list[str]]]] = []
+def both_transcripts(grbl_sim_exe: Path, eeprom: Path) -> tuple[Transcript, Transcript]:
+    """The firmware's and the simulator's transcripts, taken at the same time."""
+    ours: list[Transcript] = []
     beside = threading.Thread(target=simulator_transcript, args=(ours,))  # both at once
     beside.start()
     try:
@@ -180,12 +187,22 @@ def test_simulator_answers_like_the_firmware(grbl_sim_exe: Path, eeprom: Path) -
     finally:
         beside.join(timeout=60)
     assert len(ours) == 1, "the simulator's transcript did not finish"
-    simulated = ours[0]
-    differences = [
-        f"{label}:\n  firmware  {real}\n  simulator {ours}"
-        for (label, real), (_, ours) in zip(firmware_transcript, simulated, strict=True)
-        if real != ours
-    ]
+    return firmware_transcript, ours[0]
+
+
+def test_simulator_answers_like_the_firmware(grbl_sim_exe: Path, eeprom: Path) -> None:
+    # Up to two runs: on a loaded host grbl-sim now and then drops a report or lets a move end
+    # before the reset meant to stop it (seen in CI-like runs: 2 of 20 under full load). A real
+    # difference of the simulator's protocol shows in every run; timing shows in one.
+    for _run in range(2):
+        firmware_transcript, simulated = both_transcripts(grbl_sim_exe, eeprom)
+        differences = [
+            f"{label}:\n  firmware  {real}\n  simulator {ours}"
+            for (label, real), (_, ours) in zip(firmware_transcript, simulated, strict=True)
+            if real != ours
+        ]
+        if not differences:
+            break
     assert not differences, "\n".join(differences)
     steps = dict(firmware_transcript)  # what was compared, as the firmware said it
     assert steps["boot banner"] == ["", "Grbl 1.1h ['$' for help]", "[MSG:'$H'|'$X' to unlock]"]

@@ -68,9 +68,10 @@ def still_steps(robot: GrblRobot) -> bool:
     """Whether the firmware still carries out motion: 0.1 mm along X and back, within 10 s.
 
     grbl-sim runs GRBL's stepper "interrupt" in a host thread without the AVR's atomicity; now
-    and then (seen after a feed hold on a loaded host) it stops stepping for good, a soft reset
-    does not bring it back, and every later move waits for an ``ok`` to ``G4 P0`` that never
-    comes. Real GRBL has no such state, so a test that finds it power-cycles the firmware.
+    and then (seen after a feed hold, and mid-move, on a loaded host) it stops stepping, and
+    every later move waits for an ``ok`` to ``G4 P0`` that never comes. A soft reset cures it
+    only sometimes. Real GRBL has no such state, so a test that finds it power-cycles the
+    firmware.
     """
     try:
         position = robot.status().position or (0.0, 0.0, 0.0)
@@ -259,6 +260,15 @@ def _moved_on(robot: GrblRobot, held: tuple[float, float, float], need: float) -
     return abs((poll_status(robot).position or held)[0] - held[0]) >= need
 
 
+def _reset_for_next_try(robot: GrblRobot, firmware: FirmwareBridge) -> None:
+    """Soft reset and unlock; power-cycle a grbl-sim that no longer steps (its fault, not the
+    driver's: a hold never completes and a resume never moves without a stepping firmware)."""
+    robot.soft_reset()
+    robot.unlock()
+    if not still_steps(robot):
+        power_cycle(robot, firmware)
+
+
 def test_feed_hold_goes_hold_1_then_hold_0_and_resumes(
     robot: GrblRobot, firmware: FirmwareBridge
 ) -> None:
@@ -270,9 +280,9 @@ def test_feed_hold_goes_hold_1_then_hold_0_and_resumes(
         substates, report = _hold_once(robot, target)
         position = report.position or (target, 0.0, 0.0)
         if not (substates and substates[-1] == 0 and abs(target - position[0]) > 0.02):
-            # not held, or only at the end of the move (an idle host may finish it first)
-            robot.soft_reset()
-            robot.unlock()
+            # not held, or only at the end of the move (an idle host may finish it first), or a
+            # hold stuck at Hold:1 because the stepper thread stopped (seen in CI: [1, 1, 1])
+            _reset_for_next_try(robot, firmware)
             continue
         assert substates[0] == 1, (tries, substates[-3:], report.raw)
         held = robot.status().position
@@ -286,10 +296,7 @@ def test_feed_hold_goes_hold_1_then_hold_0_and_resumes(
         need = min(0.5, abs(target - held[0]) / 2)
         if wait_until(lambda h=held, n=need: _moved_on(robot, h, n), 10.0):
             return
-        robot.soft_reset()
-        robot.unlock()
-        if not still_steps(robot):  # grbl-sim's fault, not the driver's: a fresh firmware
-            power_cycle(robot, firmware)
+        _reset_for_next_try(robot, firmware)
     pytest.fail(f"no hold and resume in {tries} tries; last substates {substates[-3:]}")
 
 
@@ -302,13 +309,18 @@ def _estop_during_dwell(robot: GrblRobot, log: Log, firmware: FirmwareBridge) ->
         thread, failures = in_thread(lambda: robot.pick(-10.0, -10.0, -4.0, dwell_s=1.5))
         if wait_until(lambda d=dwells: log.count(("tx", "G4 P1.500")) > d, 30.0):
             break
-        # the pick never reached its dwell: it waits for the motion before it to end
+        # The pick never reached its dwell: the driver must be waiting for the answer to its
+        # last line (G4 P0 after the moves), which only a grbl-sim that stalled mid-move leaves
+        # unanswered (see still_steps; seen under load, and a soft reset may or may not cure it).
+        lines = [i for i, (direction, text) in enumerate(log) if direction == "tx" and text != "?"]
+        answers = [text for direction, text in log[lines[-1] + 1 :] if direction == "rx"]
+        assert all(text.startswith("<") for text in answers), log[lines[-1] :]  # reports only
         with contextlib.suppress(DeviceTimeout, UnexpectedReply, GrblAlarm, GrblReset):
             robot.soft_reset()
             robot.unlock()
         thread.join(timeout=20)
-        assert not still_steps(robot), "the firmware steps, yet the pick's dwell was never sent"
-        power_cycle(robot, firmware)  # grbl-sim's fault (see still_steps), not the driver's
+        if not still_steps(robot):
+            power_cycle(robot, firmware)
     else:
         pytest.fail("the pick's dwell was not sent in 3 tries")
     time.sleep(0.3)
