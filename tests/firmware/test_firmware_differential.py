@@ -114,8 +114,8 @@ SCRIPT: list[tuple[str, bytes, dict[str, float]]] = [
         {"quiet": 0.3},
     ),
     ("wait for it", b"G4 P0\n", {"quiet": 0.1, "at_least": 0.2}),
-    # quiet 0.3 s: a loaded host delays either peer's report by more than 0.05 s (seen in CI),
-    # and the move lasts 4 s, so both are still moving at the reset
+    # quiet 0.3 s: a loaded host delays either peer's report by more than 0.05 s (seen under
+    # two busy loops on 2 cores), and the move lasts 4 s, so both still move at the reset
     ("status while moving", b"?", {"quiet": 0.3}),
     # grbl-sim prints the two in either order (its reset "interrupt" is a second host thread);
     # GRBL's code and the simulator say ALARM:3 first. Compared as a set.
@@ -192,7 +192,7 @@ def both_transcripts(grbl_sim_exe: Path, eeprom: Path) -> tuple[Transcript, Tran
 
 def test_simulator_answers_like_the_firmware(grbl_sim_exe: Path, eeprom: Path) -> None:
     # Up to two runs: on a loaded host grbl-sim now and then drops a report or lets a move end
-    # before the reset meant to stop it (seen in CI-like runs: 2 of 20 under full load). A real
+    # before the reset meant to stop it (each seen once in 10 runs under two busy loops). A real
     # difference of the simulator's protocol shows in every run; timing shows in one.
     for _run in range(2):
         firmware_transcript, simulated = both_transcripts(grbl_sim_exe, eeprom)
