@@ -63,6 +63,14 @@ within one colony per plate. Factor 3 finds a little more on the AGAR plates (F1
 takes agar texture on 8 of 13 synthetic plates for colonies (contrast 1.2-1.4 times ``t``).
 Varying ``sigma_mm`` 0.15-0.4, ``min_diameter_mm`` 1.5-3 or the window 9-13 cells moved AGAR F1
 by at most 0.003.
+
+Tried and not kept (AGAR F1 0.894 as it stands). The noise median taken only away from eq. 1's
+foreground gave 0.895 and moved phone-counts 2.3 -> 2.7-3.0 %. Letting a body overlap eq. 1's
+pieces that lie mostly inside it (as ring colonies do) gave 0.879: ordinary colonies' halos
+then join their neighbours. Touching faint colonies split by a watershed of the distance
+transform gave 0.892 with none more matched: the parts of 11924's chains are ragged
+(solidity 0.25-0.7). An opening of 1-3 work pixels before the tests gave 0.887-0.894. A
+second pass at 12 px/mm for colonies of 0.4-2 mm gave 0.893-0.896, with half its finds false.
 """
 
 from __future__ import annotations
