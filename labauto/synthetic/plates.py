@@ -35,18 +35,26 @@ Choices made where the paper is silent (all geometry in pixels, scaled with ``mi
   (dust: area at most 13 px) or long and thin (glare streaks: length/width of at least 5).
 
 Coordinates follow DESIGN.md: origin at the centre of the top-left pixel, x right, y down.
+
+This module draws the dish and the colonies; the truth records are in
+:mod:`labauto.synthetic.plate_truth`, the artefacts in :mod:`labauto.synthetic.plate_artefacts`,
+the drawing and placement primitives in :mod:`labauto.synthetic.plate_canvas` and the scoring in
+:mod:`labauto.synthetic.plate_score` (all re-exported here as before).
 """
 
 from __future__ import annotations
 
-import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import cv2
 import numpy as np
 
+from labauto.synthetic.plate_artefacts import draw_artefacts, draw_lid_label
+from labauto.synthetic.plate_canvas import Placer, blend, pixel_grid, roi_box
+from labauto.synthetic.plate_score import PlateScore, score_plate
+from labauto.synthetic.plate_truth import ArtefactTruth, ColonyTruth, DishTruth, PlateTruth
 from labauto.vision.ellipse import Ellipse
 
 __all__ = [
@@ -89,180 +97,6 @@ _STAGES_RGB = {"dark": (26, 28, 32), "light": (200, 202, 198)}
 _MIN_COLOUR_CONTRAST = 70.0
 _MIN_SPECIES_CONTRAST = 60.0
 _SAMPLE_ANGLES = 128
-
-
-@dataclass(frozen=True)
-class DishTruth:
-    """The dish: ``center`` (x, y) and ``radius`` of the agar disc, ``rim_width`` of the wall."""
-
-    center: tuple[float, float]
-    radius: float
-    rim_width: float
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return ``{"center": [x, y], "radius": r, "rim_width": w}``."""
-        return {
-            "center": [self.center[0], self.center[1]],
-            "radius": self.radius,
-            "rim_width": self.rim_width,
-        }
-
-
-@dataclass(frozen=True)
-class ColonyTruth:
-    """One colony (or merged group) as drawn.
-
-    Attributes
-    ----------
-    id : int
-        Index in :attr:`PlateTruth.colonies`.
-    kind : str
-        ``"authentic"``, ``"merged"`` or ``"mixed"``.
-    center : tuple of float
-        Area centroid ``(x, y)`` of the drawn body (pixels where the body covers more than half).
-    count : int
-        Number of colonies in the body: 1 for authentic and mixed, 2 or 3 for merged.
-    ellipses : list of Ellipse
-        The undeformed ellipse of every member (one for authentic and mixed).
-    contour : ndarray, shape (n, 2)
-        Outline polygon ``(x, y)`` of the body (exact for DES, traced for merged groups).
-    area_px : int
-        Pixels covered by more than half.
-    colours_rgb : list of tuple
-        The species colours (two for a mixed colony).
-    mix_style : str
-        ``"sector"`` or ``"speckles"`` for mixed colonies, ``""`` otherwise.
-    near_agar : bool
-        True if the colony has nearly the agar's colour.
-    """
-
-    id: int
-    kind: str
-    center: tuple[float, float]
-    count: int
-    ellipses: list[Ellipse]
-    contour: np.ndarray
-    area_px: int
-    colours_rgb: list[tuple[int, int, int]]
-    mix_style: str = ""
-    near_agar: bool = False
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form (contour as a list of ``[x, y]``)."""
-        return {
-            "id": self.id,
-            "kind": self.kind,
-            "center": [self.center[0], self.center[1]],
-            "count": self.count,
-            "ellipses": [e.to_dict() for e in self.ellipses],
-            "contour": np.round(self.contour, 2).tolist(),
-            "area_px": self.area_px,
-            "colours_rgb": [list(c) for c in self.colours_rgb],
-            "mix_style": self.mix_style,
-            "near_agar": self.near_agar,
-        }
-
-
-@dataclass(frozen=True)
-class ArtefactTruth:
-    """One artefact: ``kind`` is dust, scratch, pen, label or glare; ``points`` its polyline,
-    polygon or centre; ``on_agar`` is True when it lies inside the agar disc (not on the rim)."""
-
-    kind: str
-    points: np.ndarray
-    on_agar: bool
-
-    def __post_init__(self) -> None:
-        # stored rounded to 0.01 px, as in the JSON, so a round trip is exact
-        pts = np.round(np.asarray(self.points, dtype=float).reshape(-1, 2), 2)
-        object.__setattr__(self, "points", pts)
-
-    @property
-    def center(self) -> tuple[float, float]:
-        """Mean of the artefact's points."""
-        m = self.points.reshape(-1, 2).mean(axis=0)
-        return float(m[0]), float(m[1])
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return ``{"kind", "points", "on_agar", "center"}``."""
-        return {
-            "kind": self.kind,
-            "points": self.points.tolist(),
-            "on_agar": self.on_agar,
-            "center": list(self.center),
-        }
-
-
-@dataclass(frozen=True)
-class PlateTruth:
-    """Ground truth of a generated plate."""
-
-    seed: int
-    width: int
-    height: int
-    agar: str
-    stage: str
-    dish: DishTruth
-    colonies: list[ColonyTruth] = field(default_factory=list)
-    artefacts: list[ArtefactTruth] = field(default_factory=list)
-
-    def counts(self) -> dict[str, int]:
-        """Number of colonies per kind and the total number of colonies (merged count summed)."""
-        out = {k: sum(c.kind == k for c in self.colonies) for k in ("authentic", "merged", "mixed")}
-        out["colonies_total"] = sum(c.count for c in self.colonies)
-        return out
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form of the whole truth."""
-        return {
-            "seed": self.seed,
-            "width": self.width,
-            "height": self.height,
-            "agar": self.agar,
-            "stage": self.stage,
-            "dish": self.dish.to_dict(),
-            "colonies": [c.to_dict() for c in self.colonies],
-            "artefacts": [a.to_dict() for a in self.artefacts],
-            "counts": self.counts(),
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> PlateTruth:
-        """Rebuild a truth from :meth:`to_dict` output (e.g. a sample plate's JSON)."""
-        dish = DishTruth(
-            tuple(data["dish"]["center"]), data["dish"]["radius"], data["dish"]["rim_width"]
-        )
-        colonies = [
-            ColonyTruth(
-                id=c["id"],
-                kind=c["kind"],
-                center=tuple(c["center"]),
-                count=c["count"],
-                ellipses=[
-                    Ellipse(tuple(e["center"]), tuple(e["axes"]), e["angle"]) for e in c["ellipses"]
-                ],
-                contour=np.asarray(c["contour"], dtype=float),
-                area_px=c["area_px"],
-                colours_rgb=[tuple(x) for x in c["colours_rgb"]],
-                mix_style=c["mix_style"],
-                near_agar=c["near_agar"],
-            )
-            for c in data["colonies"]
-        ]
-        artefacts = [
-            ArtefactTruth(a["kind"], np.asarray(a["points"], dtype=float), a["on_agar"])
-            for a in data["artefacts"]
-        ]
-        return cls(
-            data["seed"],
-            data["width"],
-            data["height"],
-            data["agar"],
-            data["stage"],
-            dish,
-            colonies,
-            artefacts,
-        )
 
 
 # --------------------------------------------------------------------------------------------
@@ -320,28 +154,7 @@ def _random_des(rng: np.random.Generator, cx: float, cy: float, a: float) -> _De
 
 
 # --------------------------------------------------------------------------------------------
-# Rendering helpers (float32 RGB canvas, values 0..255)
-
-
-def _blend(canvas: np.ndarray, alpha: np.ndarray, colour: np.ndarray, x0: int, y0: int) -> None:
-    """Alpha-blend ``colour`` (broadcastable to the ROI) into the canvas at ``(x0, y0)``."""
-    h, w = alpha.shape
-    roi = canvas[y0 : y0 + h, x0 : x0 + w]
-    a = alpha[..., None]
-    roi *= 1.0 - a
-    roi += a * colour
-
-
-def _roi(cx: float, cy: float, r: float, shape: tuple[int, int]) -> tuple[int, int, int, int]:
-    h, w = shape
-    x0, y0 = max(int(cx - r) - 2, 0), max(int(cy - r) - 2, 0)
-    x1, y1 = min(int(cx + r) + 3, w), min(int(cy + r) + 3, h)
-    return x0, y0, x1, y1
-
-
-def _grid(x0: int, y0: int, x1: int, y1: int) -> tuple[np.ndarray, np.ndarray]:
-    ys, xs = np.mgrid[y0:y1, x0:x1]
-    return xs.astype(np.float32), ys.astype(np.float32)
+# Drawing colonies (float32 RGB canvas, values 0..255; primitives in plate_canvas)
 
 
 def _draw_des(
@@ -358,8 +171,8 @@ def _draw_des(
     ``opacity`` below 1 draws a translucent colony: the agar shows through it, so its shading
     and highlight depart from the agar by that share too, as its colour does.
     """
-    x0, y0, x1, y1 = _roi(des.cx, des.cy, des.bound + 2.0, cover.shape)
-    xs, ys = _grid(x0, y0, x1, y1)
+    x0, y0, x1, y1 = roi_box(des.cx, des.cy, des.bound + 2.0, cover.shape)
+    xs, ys = pixel_grid(x0, y0, x1, y1)
     rho, t = des.local(xs, ys)
     scale = math.sqrt(des.a * des.b) * des.radius_factor(t)
     edge_dist = (1.0 - rho) * scale  # ~ signed distance to the boundary in px (inside > 0)
@@ -372,7 +185,7 @@ def _draw_des(
     glint = 18.0 * np.exp(-((xs - des.cx - hx) ** 2 + (ys - des.cy - hy) ** 2) / (2 * sigma**2))
     body = np.asarray(colour_of(xs, ys, rho, t), dtype=np.float32)
     colour = np.clip(body * shade + glint[..., None], 0.0, 255.0)
-    _blend(canvas[..., :], alpha * cover_share, colour, x0, y0)
+    blend(canvas[..., :], alpha * cover_share, colour, x0, y0)
     cover[y0:y1, x0:x1] |= alpha > 0.5
 
 
@@ -382,72 +195,12 @@ def _draw_ring_edge(canvas: np.ndarray, des: _Des, darker: float, width_px: floa
     The band is a Gaussian profile across the boundary, centred just inside it: the thin dark
     rim of a translucent colony whose inside is nearly the agar's colour (AGAR plate 510).
     """
-    x0, y0, x1, y1 = _roi(des.cx, des.cy, des.bound + 2.0 + width_px, canvas.shape[:2])
-    xs, ys = _grid(x0, y0, x1, y1)
+    x0, y0, x1, y1 = roi_box(des.cx, des.cy, des.bound + 2.0 + width_px, canvas.shape[:2])
+    xs, ys = pixel_grid(x0, y0, x1, y1)
     rho, t = des.local(xs, ys)
     edge_dist = (1.0 - rho) * math.sqrt(des.a * des.b) * des.radius_factor(t)
     band = np.exp(-(((edge_dist - 0.5 * width_px) / (0.5 * width_px)) ** 2)).astype(np.float32)
     canvas[y0:y1, x0:x1] -= darker * band[..., None]
-
-
-def _stroke_alpha(
-    shape: tuple[int, int], pts: np.ndarray, thickness: int, closed: bool = False
-) -> tuple[np.ndarray, int, int]:
-    """Antialiased polyline alpha in a tight ROI: returns (alpha, x0, y0)."""
-    pad = thickness + 3
-    x0 = max(int(pts[:, 0].min()) - pad, 0)
-    y0 = max(int(pts[:, 1].min()) - pad, 0)
-    x1 = min(int(pts[:, 0].max()) + pad, shape[1])
-    y1 = min(int(pts[:, 1].max()) + pad, shape[0])
-    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
-    shift = 4
-    p = np.round((pts - [x0, y0]) * (1 << shift)).astype(np.int32).reshape(-1, 1, 2)
-    cv2.polylines(mask, [p], closed, 255, thickness, cv2.LINE_AA, shift)
-    return mask.astype(np.float32) / 255.0, x0, y0
-
-
-# --------------------------------------------------------------------------------------------
-# Placement
-
-
-class _Placer:
-    """Rejection sampling of non-overlapping discs inside the usable part of the agar."""
-
-    def __init__(self, rng: np.random.Generator, cx: float, cy: float, r_use: float, gap: float):
-        self.rng, self.cx, self.cy, self.r_use, self.gap = rng, cx, cy, r_use, gap
-        self.discs: list[tuple[float, float, float]] = []
-
-    def free(self, x: float, y: float, r: float, gap: float | None = None) -> bool:
-        g = self.gap if gap is None else gap
-        if math.hypot(x - self.cx, y - self.cy) + r > self.r_use:
-            return False
-        return all(math.hypot(x - px, y - py) >= r + pr + g for px, py, pr in self.discs)
-
-    def sample(self, r: float, tries: int = 400) -> tuple[float, float] | None:
-        for _ in range(tries):
-            rr = (self.r_use - r) * math.sqrt(self.rng.uniform())
-            th = self.rng.uniform(0.0, 2.0 * np.pi)
-            x, y = self.cx + rr * math.cos(th), self.cy + rr * math.sin(th)
-            if self.free(x, y, r):
-                return x, y
-        return None
-
-    def add(self, x: float, y: float, r: float) -> None:
-        self.discs.append((x, y, r))
-
-    def clear_of_colonies(self, pts: np.ndarray, half_width: float, gap: float) -> bool:
-        for px, py, pr in self.discs:
-            if np.min(np.hypot(pts[:, 0] - px, pts[:, 1] - py)) < pr + half_width + gap:
-                return False
-        return True
-
-
-def _densify(pts: np.ndarray, step: float = 2.0) -> np.ndarray:
-    out = [pts[:1]]
-    for p, q in itertools.pairwise(pts):
-        n = max(int(np.hypot(*(q - p)) / step), 1)
-        out.append(p + (q - p) * np.linspace(0, 1, n + 1)[1:, None])
-    return np.concatenate(out)
 
 
 # --------------------------------------------------------------------------------------------
@@ -595,12 +348,12 @@ def generate_plate(
     dist = np.hypot(xs - cx, ys - cy)
     white = np.array([236.0, 238.0, 240.0])
     wall = 0.55 * agar_rgb + 0.45 * white if stage == "dark" else 0.7 * white + 0.3 * agar_rgb
-    _blend(canvas, np.clip(radius + rim - dist + 0.5, 0, 1), wall, 0, 0)
-    _blend(canvas, np.clip(radius - dist + 0.5, 0, 1), agar_rgb, 0, 0)
+    blend(canvas, np.clip(radius + rim - dist + 0.5, 0, 1), wall, 0, 0)
+    blend(canvas, np.clip(radius - dist + 0.5, 0, 1), agar_rgb, 0, 0)
     meniscus = np.clip(1.6 - np.abs(dist - radius), 0, 1) * 0.6
-    _blend(canvas, meniscus, 0.45 * agar_rgb, 0, 0)
+    blend(canvas, meniscus, 0.45 * agar_rgb, 0, 0)
     outer = np.clip(1.2 - np.abs(dist - radius - rim), 0, 1) * 0.5
-    _blend(canvas, outer, white, 0, 0)
+    blend(canvas, outer, white, 0, 0)
 
     # Grain of the agar (low-frequency noise)
     grain = cv2.resize(
@@ -612,7 +365,7 @@ def generate_plate(
 
     cover = np.zeros((height, width), bool)
     margin = 36.0 * k
-    placer = _Placer(rng, cx, cy, radius - margin, 8.0 * k)
+    placer = Placer(rng, cx, cy, radius - margin, 8.0 * k)
     colonies: list[ColonyTruth] = []
     size_lo, size_hi = 9.0 * k * colony_scale, 24.0 * k * colony_scale
     if colony_scale != 1.0:
@@ -704,10 +457,10 @@ def generate_plate(
     # Artefacts -------------------------------------------------------------------------------
     arts: list[ArtefactTruth] = []
     if artefacts:
-        arts = _draw_artefacts(canvas, rng, placer, cx, cy, radius, rim, agar_rgb, k)
+        arts = draw_artefacts(canvas, rng, placer, cx, cy, radius, rim, agar_rgb, k)
 
     if lid_label:
-        arts.append(_draw_lid_label(canvas, rng, cx, cy, radius, k))
+        arts.append(draw_lid_label(canvas, rng, cx, cy, radius, k))
 
     # Lighting, blur, noise -------------------------------------------------------------------
     phi = rng.uniform(0, 2 * np.pi)
@@ -730,39 +483,6 @@ def generate_plate(
         artefacts=arts,
     )
     return image, truth
-
-
-def _draw_lid_label(
-    canvas: np.ndarray, rng: np.random.Generator, cx: float, cy: float, radius: float, k: float
-) -> ArtefactTruth:
-    """A printed lid label across the dish: 3 rows of dot-matrix "characters", blue-black ink.
-
-    Each character is a 5x7 grid of dots (0.35 mm, about 3.5 px at 1024 px) of which about half
-    are inked, 1.2 dot pitches apart; rows run across the middle of the dish at a random angle.
-    The ink takes ~55 % of the light (a bit less of the blue), as real printed lids do.
-    """
-    angle = rng.uniform(0.0, np.pi)
-    u = np.array([math.cos(angle), math.sin(angle)])
-    v = np.array([-u[1], u[0]])
-    pitch = 4.2 * k
-    dot_r = 1.7 * k
-    ink = np.zeros(canvas.shape[:2], np.float32)
-    points = []
-    length = 1.2 * radius
-    for row in range(3):
-        base = np.array([cx, cy]) - u * length / 2 + v * (row - 1) * 10 * pitch
-        for char in range(int(length / (6 * pitch))):
-            bits = rng.uniform(size=(7, 5)) < 0.5
-            for gy, gx in zip(*np.nonzero(bits), strict=True):
-                p = base + u * (char * 6 + gx) * pitch + v * gy * pitch
-                cv2.circle(ink, (round(p[0] * 4), round(p[1] * 4)), round(dot_r * 4), 1.0, -1,
-                           cv2.LINE_AA, 2)  # fmt: skip
-                points.append(p)
-    ink = np.clip(ink, 0, 1)[..., None] * np.array([0.58, 0.55, 0.45], np.float32)
-    canvas *= 1.0 - ink
-    pts = np.array(points, float)
-    hull = cv2.convexHull(pts.astype(np.float32)).reshape(-1, 2).astype(float)
-    return ArtefactTruth("lid-label", hull, True)
 
 
 def _radius_towards(des: _Des, heading: float) -> float:
@@ -887,246 +607,4 @@ def _truth_from_mask(
         colours_rgb=[tuple(round(float(v)) for v in np.clip(c, 0, 255)) for c in colours],
         mix_style=style,
         near_agar=near_agar,
-    )
-
-
-def _draw_artefacts(
-    canvas: np.ndarray,
-    rng: np.random.Generator,
-    placer: _Placer,
-    cx: float,
-    cy: float,
-    radius: float,
-    rim: float,
-    agar_rgb: np.ndarray,
-    k: float,
-) -> list[ArtefactTruth]:
-    shape = canvas.shape[:2]
-    arts: list[ArtefactTruth] = []
-    gap = 6.0 * k
-
-    def inside_agar(pts: np.ndarray, pad: float) -> bool:
-        return bool(np.all(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) < radius - pad))
-
-    def on_circle(r: float, th: float) -> np.ndarray:
-        return np.array([cx + r * math.cos(th), cy + r * math.sin(th)])
-
-    # Labels on the rim: a paper rectangle tangent to the wall with some "text" strokes.
-    for _ in range(int(rng.integers(0, 2)) + 1):
-        th = rng.uniform(0, 2 * np.pi)
-        c = on_circle(radius + rim * 0.5 + 8 * k, th)
-        tang = np.array([-math.sin(th), math.cos(th)])
-        norm = np.array([math.cos(th), math.sin(th)])
-        hw, hh = rng.uniform(45, 70) * k, 22 * k
-        poly = np.array(
-            [c + sx * hw * tang + sy * hh * norm for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
-        )
-        alpha, x0, y0 = _stroke_alpha(shape, poly, 1, closed=True)
-        fill = np.zeros(alpha.shape, np.uint8)
-        cv2.fillPoly(fill, [np.round(poly - [x0, y0]).astype(np.int32)], 255)
-        _blend(
-            canvas,
-            np.maximum(alpha, fill / 255.0).astype(np.float32),
-            np.array([244.0, 242.0, 230.0]),
-            x0,
-            y0,
-        )
-        for line in range(2):
-            off = (line - 0.5) * hh * 0.8
-            p0 = c - 0.8 * hw * tang + off * norm
-            p1 = c + rng.uniform(0.0, 0.8) * hw * tang + off * norm
-            pts = _densify(np.array([p0, p1]), 6.0)
-            pts += rng.normal(0, 1.2 * k, pts.shape)
-            a, x0, y0 = _stroke_alpha(shape, pts, max(int(2 * k), 1))
-            _blend(canvas, a, np.array([40.0, 40.0, 60.0]), x0, y0)
-        arts.append(ArtefactTruth("label", poly, False))
-
-    # Pen strokes on the rim and on the lid over the agar (scribbled digits/lines).
-    ink = np.array([30.0, 40.0, 100.0]) if rng.uniform() < 0.5 else np.array([28.0, 28.0, 30.0])
-    for i in range(int(rng.integers(2, 5))):
-        on_rim = i < 2
-        thick = int(rng.integers(3, 5))
-        for _ in range(60):
-            if on_rim:
-                th = rng.uniform(0, 2 * np.pi)
-                start = on_circle(radius + rng.uniform(-8, rim) * k, th)
-            else:
-                rr = (radius - 60 * k) * math.sqrt(rng.uniform())
-                start = on_circle(rr, rng.uniform(0, 2 * np.pi))
-            n_seg = int(rng.integers(1, 4))
-            pts = [start]
-            heading = rng.uniform(0, 2 * np.pi)
-            for _s in range(n_seg):
-                length = rng.uniform(25, 70) * k
-                pts.append(pts[-1] + length * np.array([math.cos(heading), math.sin(heading)]))
-                heading += rng.choice([-1, 1]) * rng.uniform(np.radians(35), np.radians(150))
-            poly = _densify(np.array(pts), 2.0)
-            d = np.hypot(poly[:, 0] - cx, poly[:, 1] - cy)
-            if on_rim and not (np.all(d > radius - 16 * k) and np.all(d < radius + rim + 30 * k)):
-                continue
-            if not on_rim and not (
-                inside_agar(poly, 20 * k) and placer.clear_of_colonies(poly, thick / 2, gap)
-            ):
-                continue
-            alpha, x0, y0 = _stroke_alpha(shape, poly, thick)
-            _blend(canvas, alpha * 0.9, ink, x0, y0)
-            arts.append(ArtefactTruth("pen", poly, not on_rim))
-            break
-
-    # Scratches: long thin lines in the agar, a little lighter or darker than the agar.
-    for _ in range(int(rng.integers(1, 4))):
-        for _try in range(80):
-            rr = (radius - 40 * k) * math.sqrt(rng.uniform())
-            c = on_circle(rr, rng.uniform(0, 2 * np.pi))
-            heading = rng.uniform(0, np.pi)
-            length = rng.uniform(60, 260) * k
-            d = np.array([math.cos(heading), math.sin(heading)])
-            bend = np.array([-d[1], d[0]]) * rng.uniform(-8, 8) * k
-            pts = np.array([c - d * length / 2, c + bend, c + d * length / 2])
-            poly = _densify(pts, 2.0)
-            if not inside_agar(poly, 12 * k) or not placer.clear_of_colonies(poly, 1.0, gap):
-                continue
-            alpha, x0, y0 = _stroke_alpha(shape, poly, 1)
-            tone = agar_rgb * (1.25 if rng.uniform() < 0.6 else 0.75)
-            _blend(canvas, alpha * 0.85, np.clip(tone, 0, 255), x0, y0)
-            arts.append(ArtefactTruth("scratch", poly, True))
-            break
-
-    # Glare: long soft near-white streaks over the agar and an arc along the wall.
-    for _ in range(int(rng.integers(1, 3))):
-        for _try in range(80):
-            length = rng.uniform(60, 150) * k
-            half_w = length / rng.uniform(20, 30)
-            rr = (radius - 50 * k) * math.sqrt(rng.uniform())
-            c = on_circle(rr, rng.uniform(0, 2 * np.pi))
-            heading = rng.uniform(0, np.pi)
-            d = np.array([math.cos(heading), math.sin(heading)])
-            pts = _densify(np.array([c - d * length / 2, c + d * length / 2]), 2.0)
-            if not inside_agar(pts, 20 * k) or not placer.clear_of_colonies(pts, half_w * 2, gap):
-                continue
-            x0, y0, x1, y1 = _roi(c[0], c[1], length / 2 + 3 * half_w, shape)
-            xs, ys = _grid(x0, y0, x1, y1)
-            along = (xs - c[0]) * d[0] + (ys - c[1]) * d[1]
-            across = -(xs - c[0]) * d[1] + (ys - c[1]) * d[0]
-            a = np.exp(-0.5 * (across / half_w) ** 2) * np.clip(
-                (length / 2 - np.abs(along)) / (2 * half_w), 0, 1
-            )
-            _blend(canvas, (0.75 * a).astype(np.float32), np.array([252.0, 252.0, 252.0]), x0, y0)
-            arts.append(ArtefactTruth("glare", pts, True))
-            break
-    th0 = rng.uniform(0, 2 * np.pi)
-    arc = np.array([on_circle(radius - 4 * k, th0 + s) for s in np.linspace(0, 0.5, 40)])
-    alpha, x0, y0 = _stroke_alpha(shape, arc, max(int(4 * k), 2))
-    _blend(canvas, alpha * 0.6, np.array([250.0, 250.0, 250.0]), x0, y0)
-    arts.append(ArtefactTruth("glare", arc, False))
-
-    # Dust: tiny dark specks anywhere on the agar, away from colonies.
-    for _ in range(int(rng.integers(8, 20))):
-        for _try in range(40):
-            rr = (radius - 14 * k) * math.sqrt(rng.uniform())
-            c = on_circle(rr, rng.uniform(0, 2 * np.pi))
-            r_d = rng.uniform(0.8, 2.0)
-            if not placer.clear_of_colonies(c[None, :], r_d, gap):
-                continue
-            x0, y0, x1, y1 = _roi(c[0], c[1], r_d + 2, shape)
-            xs, ys = _grid(x0, y0, x1, y1)
-            a = np.clip(r_d - np.hypot(xs - c[0], ys - c[1]) + 0.5, 0, 1).astype(np.float32)
-            _blend(canvas, 0.85 * a, np.array([35.0, 32.0, 30.0]), x0, y0)
-            arts.append(ArtefactTruth("dust", c[None, :], True))
-            break
-    return arts
-
-
-# --------------------------------------------------------------------------------------------
-# Scoring an analysis against the truth
-
-
-@dataclass(frozen=True)
-class PlateScore:
-    """How well a list of reported colonies matches a plate's truth.
-
-    Attributes
-    ----------
-    n_truth : int
-        Colonies (bodies) in the truth.
-    found : int
-        Truth colonies matched by a reported colony.
-    correct : int
-        Matched colonies whose class equals the truth's kind.
-    count_correct, n_merged_found : int
-        Merged bodies found as merged whose estimated count equals the truth count, and merged
-        bodies found as merged.
-    false_positives : int
-        Reported colonies that match no truth colony.
-    artefacts_reported : int
-        False positives that lie on an artefact.
-    confusion : dict
-        ``{(truth kind, reported class): n}``, with ``"missed"`` as the reported class.
-    """
-
-    n_truth: int
-    found: int
-    correct: int
-    count_correct: int
-    n_merged_found: int
-    false_positives: int
-    artefacts_reported: int
-    confusion: dict[tuple[str, str], int]
-
-
-def score_plate(truth: PlateTruth, colonies: list[Any], scale: float = 1.0) -> PlateScore:
-    """Match reported colonies to the truth and count what was found and classified right.
-
-    A reported colony (anything with ``centroid``, ``klass`` and ``estimated_count``) matches
-    the truth colony whose outline contains its centroid, or, failing that, the nearest truth
-    centre within half the truth's equivalent radius; each truth colony is matched at most once.
-    ``scale``: the colonies were reported on the plate resampled by this factor (as
-    ``cv2.resize(image, None, fx=scale, fy=scale)``); their centroids are mapped back first.
-    """
-    polys = [c.contour.astype(np.float32).reshape(-1, 1, 2) for c in truth.colonies]
-    used: set[int] = set()
-    found = correct = count_ok = merged_found = fp = art = 0
-    confusion: dict[tuple[str, str], int] = {}
-    for col in colonies:
-        # pixel centres: x in the resampled image is at (x + 0.5) / scale - 0.5 in the plate's
-        x = (float(col.centroid[0]) + 0.5) / scale - 0.5
-        y = (float(col.centroid[1]) + 0.5) / scale - 0.5
-        match = None
-        for i, (tc, poly) in enumerate(zip(truth.colonies, polys, strict=True)):
-            if i in used:
-                continue
-            if cv2.pointPolygonTest(poly, (x, y), False) >= 0 or math.hypot(
-                x - tc.center[0], y - tc.center[1]
-            ) <= 0.5 * math.sqrt(tc.area_px / math.pi):
-                match = i
-                break
-        if match is None:
-            fp += 1
-            for a in truth.artefacts:
-                pts = a.points.reshape(-1, 2)
-                if np.min(np.hypot(pts[:, 0] - x, pts[:, 1] - y)) < 25.0 or (
-                    a.kind in ("label", "lid-label")
-                    and cv2.pointPolygonTest(
-                        pts.astype(np.float32).reshape(-1, 1, 2), (x, y), False
-                    )
-                    >= 0
-                ):
-                    art += 1
-                    break
-            continue
-        used.add(match)
-        tc = truth.colonies[match]
-        found += 1
-        key = (tc.kind, col.klass)
-        confusion[key] = confusion.get(key, 0) + 1
-        if col.klass == tc.kind:
-            correct += 1
-            if tc.kind == "merged":
-                merged_found += 1
-                count_ok += int(col.estimated_count == tc.count)
-    for i, tc in enumerate(truth.colonies):
-        if i not in used:
-            confusion[(tc.kind, "missed")] = confusion.get((tc.kind, "missed"), 0) + 1
-    return PlateScore(
-        len(truth.colonies), found, correct, count_ok, merged_found, fp, art, confusion
     )
