@@ -70,7 +70,7 @@ pieces that lie mostly inside it (as ring colonies do) gave 0.879: ordinary colo
 then join their neighbours. Touching faint colonies split by a watershed of the distance
 transform gave 0.892 with none more matched: the parts of 11924's chains are ragged
 (solidity 0.25-0.7). An opening of 1-3 work pixels before the tests gave 0.887-0.894. A
-second pass at 12 px/mm for colonies of 0.4-2 mm gave 0.893-0.896, with half its finds false.
+second pass at 12 px/mm for colonies of 0.4-2 mm gave 0.893-0.896, about half its finds false.
 """
 
 from __future__ import annotations

@@ -44,8 +44,8 @@ plate of the generator (``benchmarks/bench_plate.py``), most of it in ``cv2.Houg
 The centre is the Hough circle's, within one accumulator cell (1.5 work pixels, ~0.4 mm).
 Not found: rings under 2 mm, rings cut by another body, and the large soft-edged colonies of
 plates 12031 and 11924 (their edge spreads over a millimetre or more: no Canny edge). A second
-search at 2-4 px/mm (Canny 6-20, perfectness 0.3-0.8) did not find them either: 0-5 circles
-on 12031, none of them these colonies; AGAR F1 0.892-0.895 against 0.894.
+search at 2-4 px/mm (Canny 6-20, perfectness 0.3-0.8) did not find them either: it kept 0-5
+circles on 12031, whose missed large colonies stayed 19-20; AGAR F1 0.892-0.895 against 0.894.
 """
 
 from __future__ import annotations
