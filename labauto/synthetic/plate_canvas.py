@@ -27,6 +27,7 @@ def blend(canvas: np.ndarray, alpha: np.ndarray, colour: np.ndarray, x0: int, y0
 
 
 def roi_box(cx: float, cy: float, r: float, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    """``(x0, y0, x1, y1)`` of the disc ``(cx, cy, r)`` with 2 px to spare, clipped to ``shape``."""
     h, w = shape
     x0, y0 = max(int(cx - r) - 2, 0), max(int(cy - r) - 2, 0)
     x1, y1 = min(int(cx + r) + 3, w), min(int(cy + r) + 3, h)
@@ -34,6 +35,7 @@ def roi_box(cx: float, cy: float, r: float, shape: tuple[int, int]) -> tuple[int
 
 
 def pixel_grid(x0: int, y0: int, x1: int, y1: int) -> tuple[np.ndarray, np.ndarray]:
+    """The x and y coordinates (float32) of every pixel of ``[x0, x1) x [y0, y1)``."""
     ys, xs = np.mgrid[y0:y1, x0:x1]
     return xs.astype(np.float32), ys.astype(np.float32)
 
@@ -62,12 +64,14 @@ class Placer:
         self.discs: list[tuple[float, float, float]] = []
 
     def free(self, x: float, y: float, r: float, gap: float | None = None) -> bool:
+        """Whether a disc ``(x, y, r)`` lies on the usable agar, ``gap`` clear of every disc."""
         g = self.gap if gap is None else gap
         if math.hypot(x - self.cx, y - self.cy) + r > self.r_use:
             return False
         return all(math.hypot(x - px, y - py) >= r + pr + g for px, py, pr in self.discs)
 
     def sample(self, r: float, tries: int = 400) -> tuple[float, float] | None:
+        """A free centre for a disc of radius ``r`` (uniform on the agar), or None."""
         for _ in range(tries):
             rr = (self.r_use - r) * math.sqrt(self.rng.uniform())
             th = self.rng.uniform(0.0, 2.0 * np.pi)
@@ -77,9 +81,11 @@ class Placer:
         return None
 
     def add(self, x: float, y: float, r: float) -> None:
+        """Take the disc ``(x, y, r)``."""
         self.discs.append((x, y, r))
 
     def clear_of_colonies(self, pts: np.ndarray, half_width: float, gap: float) -> bool:
+        """Whether a stroke through ``pts``, ``half_width`` wide, keeps ``gap`` from every disc."""
         for px, py, pr in self.discs:
             if np.min(np.hypot(pts[:, 0] - px, pts[:, 1] - py)) < pr + half_width + gap:
                 return False
@@ -87,6 +93,7 @@ class Placer:
 
 
 def densify(pts: np.ndarray, step: float = 2.0) -> np.ndarray:
+    """The polyline ``pts`` with points inserted about every ``step`` px along each segment."""
     out = [pts[:1]]
     for p, q in itertools.pairwise(pts):
         n = max(int(np.hypot(*(q - p)) / step), 1)
