@@ -122,6 +122,7 @@ def score_boxes(result: PlateResult, boxes: np.ndarray, tolerance_px: float = 2.
             taken[t] = True
             matched += 1
     offered = held[[c.klass == "authentic" for c in result.colonies]]
+    inside_mm = _inside_edge_mm(result, boxes)
     return BoxScore(
         result.counts["colonies_estimate"],
         len(boxes),
@@ -129,8 +130,8 @@ def score_boxes(result: PlateResult, boxes: np.ndarray, tolerance_px: float = 2.
         len(offered),
         int(np.sum(offered >= 2)),
         int(np.sum(offered == 0)),
-        missed_causes(result, boxes, ~taken),
-        recall_by_edge(result, boxes, taken),
+        missed_causes(result, boxes, ~taken, inside_mm),
+        recall_by_edge(inside_mm, taken),
     )
 
 
@@ -159,33 +160,32 @@ def _inside_edge_mm(result: PlateResult, boxes: np.ndarray) -> np.ndarray:
     return (r - np.hypot(x - cx, y - cy)) / _px_per_mm(result)
 
 
-def recall_by_edge(
-    result: PlateResult, boxes: np.ndarray, matched: np.ndarray
-) -> dict[str, tuple[int, int]]:
+def recall_by_edge(inside_mm: np.ndarray, matched: np.ndarray) -> dict[str, tuple[int, int]]:
     """``(truth boxes, matched)`` by how far inside the dish's edge found a box's centre lies
-    (``EDGE_BANDS``; beyond the edge counts as within 2 mm): colonies at the meniscus are the
-    rim model's and the usable area's business."""
+    (``inside_mm``, :func:`_inside_edge_mm`; ``EDGE_BANDS``, beyond the edge counting as
+    within 2 mm): colonies at the meniscus are the rim model's and the usable area's business."""
     limits = [limit for limit, _ in EDGE_BANDS]
-    band = np.searchsorted(limits, _inside_edge_mm(result, boxes), side="right")
+    band = np.searchsorted(limits, inside_mm, side="right")
     return {
         name: (int(np.sum(band == i)), int(np.sum(matched[band == i])))
         for i, (_, name) in enumerate(EDGE_BANDS)
     }
 
 
-def missed_causes(result: PlateResult, boxes: np.ndarray, missed: np.ndarray) -> dict[str, int]:
+def missed_causes(
+    result: PlateResult, boxes: np.ndarray, missed: np.ndarray, inside_mm: np.ndarray
+) -> dict[str, int]:
     """The unmatched truth boxes (``missed``) by cause (``MISSED[1:]``): where the box's centre
-    lies, and for one in no reported body, the box's size (the root of its area) in mm at the
-    scale read from the dish found."""
+    lies (``inside_mm``: how far inside the dish's edge, :func:`_inside_edge_mm`), and for one
+    in no reported body, the box's size (the root of its area) in mm at the scale read from the
+    dish found."""
     px_per_mm = _px_per_mm(result)
     contours = [np.asarray(c.contour, np.float32).reshape(-1, 1, 2) for c in result.colonies]
     causes: Counter[str] = Counter()
-    for (x0, y0, x1, y1), inside_mm in zip(
-        boxes[missed], _inside_edge_mm(result, boxes[missed]), strict=True
-    ):
+    for (x0, y0, x1, y1), inside in zip(boxes[missed], inside_mm[missed], strict=True):
         x, y = (x0 + x1) / 2, (y0 + y1) / 2
         size_mm = float(np.sqrt((x1 - x0) * (y1 - y0))) / px_per_mm
-        if inside_mm < 0:
+        if inside < 0:
             cause = MISSED[1]
         elif any(cv2.pointPolygonTest(c, (float(x), float(y)), False) >= 0 for c in contours):
             cause = MISSED[2]
