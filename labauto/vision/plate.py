@@ -49,7 +49,8 @@ Pipeline and the choices it makes where the paper leaves room:
    strokes; the paper's DES limit is about 1:4); area above ``max_fill_ratio`` times the largest
    inscribed disc (curved or closed pen writing), unless it is as wide as the plate's colonies
    (``chain_ratio``: a chain of colonies along a streak, counted as a merged body); arcs
-   along the rim, pieces of the lid's and the wall's ring lines (never a chain:
+   along the rim, pieces of the lid's and the wall's ring lines, and pieces the opening left
+   of a band along the rim that goes on past both their ends (never a chain:
    :mod:`labauto.vision.plate_rim_arcs`); printed or written ink (black or blue,
    stroke-shaped, dot-sized or dotted: :mod:`labauto.vision.plate_ink`). The body's mask is
    its filled contour restricted to the foreground (a loop of ink is not solid) and closed
@@ -135,7 +136,7 @@ from labauto.vision.plate_objects import (
 )
 from labauto.vision.plate_params import PlateParams
 from labauto.vision.plate_result import Colony, PlateResult
-from labauto.vision.plate_rim_arcs import rim_arcs
+from labauto.vision.plate_rim_arcs import on_ring_lines, rim_arcs
 
 __all__ = [
     "Colony",
@@ -217,6 +218,12 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
         if (arc & ~bodies.stroke).any():
             rejected["rim_arc"] = int((arc & ~bodies.stroke).sum())
         bodies.stroke |= arc
+        if objects.unopened is not None:  # a piece of a line that goes on past both its ends
+            line = on_ring_lines(contours, bodies.index, ~bodies.stroke, rim, ppm, objects.unopened)
+            if line.any():
+                rejected["ring_line"] = int(line.sum())
+                bodies.stroke |= line
+                arc |= line
     stroke_shaped = bodies.stroke & ~arc
     # a single colony's shape: a DES outline, no waist, round
     single = des_shape[bodies.index] & (bodies.concavity < params.max_concavity)

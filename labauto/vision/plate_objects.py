@@ -101,7 +101,8 @@ class Objects:
     ``doubtful`` marks the objects that are counted but never offered for picking: lone dots
     the opening erased and that came back without a hue of their own
     (:func:`labauto.vision.plate_opening.with_erased_colonies`). ``foreground`` is eq. 1's
-    final mask (None for the generic detector).
+    final mask, ``unopened`` the same before thin lines were opened away (both None for the
+    generic detector).
     """
 
     contours: list[np.ndarray]
@@ -111,12 +112,18 @@ class Objects:
     rejected: dict[str, int]
     foreground: np.ndarray | None
     doubtful: np.ndarray
+    unopened: np.ndarray | None = None
 
     @classmethod
-    def none(cls, rejected: dict[str, int], foreground: np.ndarray | None) -> Objects:
+    def none(
+        cls,
+        rejected: dict[str, int],
+        foreground: np.ndarray | None,
+        unopened: np.ndarray | None = None,
+    ) -> Objects:
         """No object (all rejected, or none found)."""
         empty = np.zeros(0, bool)
-        return cls([], np.zeros(0), empty, np.zeros((0, 2)), rejected, foreground, empty)
+        return cls([], np.zeros(0), empty, np.zeros((0, 2)), rejected, foreground, empty, unopened)
 
 
 def _at_rim(usable: np.ndarray, contours: list[np.ndarray]) -> np.ndarray:
@@ -166,6 +173,7 @@ def objects_by_segmentation(
         found = ring_circles(roi, usable, ppm) if circles is None else circles.result()
         fg = ring_bodies(usable, fg, found, ppm)
     dots = None  # lone dots put back after the opening: doubtful colonies
+    unopened = fg  # the ring lines the opening takes away tell their pieces (step 3)
     if params.open_mm > 0:
         # lines thinner than open_mm (the lid's and the wall's edges, scratches, hairs) go, so
         # colonies touching them come apart from them
@@ -180,14 +188,14 @@ def objects_by_segmentation(
     candidates = [c for c in found if len(c) >= min_points]
     rejected = {"dust": len(found) - len(candidates), "rim": 0}
     if not candidates:
-        return Objects.none(rejected, fg)
+        return Objects.none(rejected, fg, unopened)
     at_rim = np.zeros(len(candidates), bool)
     if params.drop_at_border:
         at_rim = _at_rim(usable, candidates)
     kept = [c for c, rim in zip(candidates, at_rim.tolist(), strict=True) if not rim]
     rejected["rim"] = len(candidates) - len(kept)
     if not kept:
-        return Objects.none(rejected, fg)
+        return Objects.none(rejected, fg, unopened)
     offsets = np.cumsum([0] + [len(c) for c in kept])
     points = np.concatenate(kept).reshape(-1, 2)
     grads = _gradients(dev, points)
@@ -199,7 +207,9 @@ def objects_by_segmentation(
         first = np.array([c[0, 0] for c in kept])
         doubtful = dots[first[:, 1], first[:, 0]] > 0
     statistic = sa.statistic(params.statistic)
-    return Objects(kept, statistic, sa.centroid_inside, sa.centroid, rejected, fg, doubtful)
+    return Objects(
+        kept, statistic, sa.centroid_inside, sa.centroid, rejected, fg, doubtful, unopened
+    )
 
 
 def objects_by_detector(roi: np.ndarray, usable: np.ndarray, params: PlateParams) -> Objects:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -9,7 +11,7 @@ import pytest
 import labauto.vision.plate as plate
 from labauto.synthetic.plates import generate_plate, score_plate
 from labauto.vision.plate import analyze_plate
-from labauto.vision.plate_rim_arcs import rim_arcs
+from labauto.vision.plate_rim_arcs import on_ring_lines, rim_arcs
 
 PPM = 12.0  # px per mm
 RIM = (600.0, 600.0, 540.0)  # the usable circle: 45 mm
@@ -95,3 +97,50 @@ def test_ring_lines_of_a_lid_on_a_webcam_frame_are_not_colonies(
     without = score(analyze_plate(frame))
     assert with_arcs.false_positives <= 1 < without.false_positives  # type: ignore[attr-defined]
     assert with_arcs.found == without.found  # type: ignore[attr-defined]
+
+
+def _ring_line_test(body: np.ndarray, unopened: np.ndarray, which: bool = True) -> bool:
+    contour = _contour(body)
+    index = np.zeros(1, np.intp)
+    found = on_ring_lines([contour], index, np.array([which]), RIM, PPM, unopened)
+    return bool(found[0])
+
+
+def test_a_piece_of_a_ring_line_that_goes_on_past_both_its_ends_is_found() -> None:
+    band = _arc(42.0, 0.8, 60.0, at=80.0)  # a band 3 mm inside the rim, 0.8 mm wide
+    piece = cv2.bitwise_and(band, _arc(42.0, 2.0, 2.0, at=109.0))  # 1.5 mm of it survived
+    assert _ring_line_test(piece, band)
+    # the same piece where the band ends just past it on one side is no piece of a line
+    assert not _ring_line_test(piece, _arc(42.0, 0.8, 31.5, at=80.0))
+    assert not _ring_line_test(piece, band, which=False)  # not asked
+
+
+def test_a_colony_on_a_thin_ring_line_or_at_the_rim_alone_is_kept() -> None:
+    line = _arc(42.0, 0.3, 60.0, at=80.0)
+    colony = _disc(42.0, 2.0, at_deg=110.0)
+    # the line covers 0.3 of the colony's 2 mm radial span past its ends
+    assert not _ring_line_test(colony, cv2.bitwise_or(line, colony))
+    assert not _ring_line_test(colony, colony)  # nothing beyond it
+    # a band as wide as the colony, 15 mm inside the rim: no ring line there
+    inner = _arc(30.0, 2.0, 60.0, at=80.0)
+    assert not _ring_line_test(cv2.bitwise_and(inner, _arc(30.0, 3.0, 3.0, at=109.0)), inner)
+
+
+def test_no_body_no_ring_line() -> None:
+    empty = np.zeros((1200, 1200), np.uint8)
+    found = on_ring_lines([], np.zeros(0, np.intp), np.zeros(0, bool), RIM, PPM, empty)
+    assert found.shape == (0,)
+
+
+PHONE = Path(__file__).resolve().parents[3] / "shared" / "realplates" / "phone-counts"
+
+
+@pytest.mark.skipif(not PHONE.is_dir(), reason="real plate photos not present")
+def test_a_phone_photo_whose_meniscus_band_the_opening_shreds_when_the_data_are_present() -> None:
+    """IMG_2528 (12 colonies counted by hand): the band of the meniscus and the wall's inner
+    line, speckled, is foreground that the opening breaks into pieces; they were counted as
+    24 colonies in all before the ring-line test."""
+    image = cv2.imread(str(PHONE / "images" / "IMG_2528.JPG"), cv2.IMREAD_COLOR)
+    result = analyze_plate(image)
+    assert result.rejected.get("ring_line", 0) >= 5
+    assert 12 <= result.counts["colonies_estimate"] <= 15
