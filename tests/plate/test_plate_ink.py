@@ -8,6 +8,7 @@ import pytest
 
 from labauto.vision import plate_ink
 from labauto.vision.plate import PlateParams, analyze_plate
+from labauto.vision.plate_bodies import measure_bodies
 
 PX_PER_MM = 6.0  # coarser than min_analysis_px_per_mm: resampled up for the analysis
 AGAR_BGR = (120, 180, 205)
@@ -51,3 +52,50 @@ def test_a_plate_of_grey_colonies_keeps_its_pairs(monkeypatch: pytest.MonkeyPatc
     assert _counts(img) == ([1, 1, 1, 1, 1, 2], 0)
     monkeypatch.setattr(plate_ink, "INK_SINGLES", 1.01)  # the rule used regardless
     assert _counts(img) == ([1, 1, 1, 1, 1], 1)
+
+
+DARK_AGAR_BGR = np.array([60.0, 66.0, 70.0])  # a dark plate's agar, as the 2048 px AGAR photos
+
+
+def _faint_bodies(dot_bgr: np.ndarray, dotted: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """``ink_bodies`` of one body of radius 30 px (12 px/mm) on the dark agar: a dot-matrix
+    character's dots blurred into one body by the faint pass (dots of 2 px radius, 7 px apart,
+    of the colour ``dot_bgr``), or the same darkening spread evenly over it; and the body's
+    mean darkening."""
+    rng = np.random.default_rng(1)
+    roi = np.tile(DARK_AGAR_BGR, (100, 100, 1))
+    disc = np.zeros((100, 100), np.uint8)
+    cv2.circle(disc, (50, 50), 30, 1, -1)
+    dots = np.zeros_like(disc)
+    for y in range(22, 80, 7):
+        for x in range(22, 80, 7):
+            cv2.circle(dots, (x, y), 2, 1, -1)
+    dots &= disc
+    if dotted:
+        roi[dots > 0] = dot_bgr
+    else:  # the dots' darkening spread over the whole body
+        share = dots.sum() / disc.sum()
+        roi[disc > 0] = DARK_AGAR_BGR + share * (dot_bgr - DARK_AGAR_BGR)
+    roi = np.clip(roi + rng.normal(0.0, 1.0, roi.shape), 0, 255).astype(np.uint8)
+    background = np.tile(DARK_AGAR_BGR, (100, 100, 1)).astype(np.uint8)
+    contours, _ = cv2.findContours(disc, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    params = PlateParams(
+        px_per_mm=12.0, min_colony_area_px=10.0, max_colony_area_px=1e6, min_width_px=1.0
+    )
+    bodies = measure_bodies(list(contours), disc * 255, np.zeros(1, bool), params, {})
+    darkening = 1.0 - roi[disc > 0].astype(float).sum() / (DARK_AGAR_BGR.sum() * disc.sum())
+    return plate_ink.ink_bodies(roi, background, bodies, np.ones(1, bool), 12.0), darkening
+
+
+def test_faint_dot_matrix_print_on_dark_agar_is_ink(monkeypatch: pytest.MonkeyPatch) -> None:
+    grey_dots = 0.75 * DARK_AGAR_BGR  # a quarter of every channel's light taken away
+    ink, darkening = _faint_bodies(grey_dots)
+    assert 0.05 < darkening < 0.10  # dark enough for a dotted body, not for any ink body
+    assert ink.tolist() == [True]
+    # the same darkening spread evenly (a faint grey colony) is solid: no print
+    assert _faint_bodies(grey_dots, dotted=False)[0].tolist() == [False]
+    # yellow dots (more blue than red taken away: pigment) are no print either
+    assert _faint_bodies(DARK_AGAR_BGR * [0.6, 0.75, 0.85])[0].tolist() == [False]
+    # with the least darkening of every ink body, the dotted print was counted as a colony
+    monkeypatch.setattr(plate_ink, "INK_DOTTED_DARKER", plate_ink.INK_DARKER)
+    assert _faint_bodies(grey_dots)[0].tolist() == [False]
