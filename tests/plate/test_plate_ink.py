@@ -17,12 +17,17 @@ GREY_BGR = (70, 80, 85)  # takes a like share of every channel away: as ink does
 SINGLES = [(80, 80), (280, 80), (80, 280), (180, 100), (100, 180)]
 
 
-def _frame(colony_bgr: tuple[int, int, int], printed: bool) -> np.ndarray:
-    """360 px at 6 px/mm: five colonies 2 mm across, a touching pair, and optionally a printed
-    "38" (2.5 mm tall, dark grey), all blurred as a webcam's optics do."""
+def _frame(
+    colony_bgr: tuple[int, int, int],
+    printed: bool,
+    spots: tuple[tuple[int, int], ...] = (*SINGLES, (250, 260), (260, 260)),
+) -> np.ndarray:
+    """360 px at 6 px/mm: colonies 2 mm across at ``spots`` (by default five and a touching
+    pair), and optionally a printed "38" (2.5 mm tall, dark grey), all blurred as a webcam's
+    optics do."""
     img = np.zeros((360, 360, 3), np.uint8)
     img[:] = AGAR_BGR
-    for x, y in [*SINGLES, (250, 260), (260, 260)]:
+    for x, y in spots:
         cv2.circle(img, (x, y), 6, colony_bgr, -1, cv2.LINE_AA)
     if printed:
         cv2.putText(img, "38", (150, 200), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (55, 80, 90), 3)
@@ -44,6 +49,21 @@ def test_blurred_print_among_pigmented_colonies_is_ink(monkeypatch: pytest.Monke
     monkeypatch.setattr(plate_ink, "INK_SINGLES", 0.0)
     counts, ink = _counts(img)
     assert sum(counts) > 7 and ink == 0
+
+
+def test_merged_print_on_a_sparse_plate_is_ink(monkeypatch: pytest.MonkeyPatch) -> None:
+    # two colonies, too few single colonies to tell whether the plate's colonies are grey, and
+    # two printed characters blurred into one dark grey blob (two discs of 1.2 mm radius): its
+    # colour and its shape, no single colony's, say print
+    img = _frame(CREAM_BGR, printed=False, spots=tuple(SINGLES[:2]))
+    for x in (160, 170):
+        cv2.circle(img, (x, 200), 7, (55, 80, 90), -1, cv2.LINE_AA)
+    img = cv2.GaussianBlur(img, (0, 0), 1.0)  # the blob as blurred as the rest
+    assert _counts(img) == ([1, 1], 1)
+    # judged only with three single colonies or more, the blob was counted as two colonies
+    monkeypatch.setattr(plate_ink, "MIN_SINGLES", 0)
+    monkeypatch.setattr(plate_ink, "INK_SINGLES", 0.0)
+    assert _counts(img) == ([1, 1, 2], 0)
 
 
 def test_a_plate_of_grey_colonies_keeps_its_pairs(monkeypatch: pytest.MonkeyPatch) -> None:
