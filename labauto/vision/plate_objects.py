@@ -53,7 +53,8 @@ def start_beside(
     side = ThreadPoolExecutor(max_workers=1, thread_name_prefix="labauto-plate")
     profile = circles = None
     if rim is not None and params.rim_band_mm > 0:
-        profile = side.submit(rim_profile, roi, rim, rim_band_px(params))
+        ppm = float(params.px_per_mm or 0.0)
+        profile = side.submit(rim_profile, roi, rim, rim_band_px(params), ppm)
     if params.method != "detector" and params.find_rings:
         circles = side.submit(ring_circles, roi, usable, float(params.px_per_mm or 1.0))
     side.shutdown(wait=False)  # the thread ends with its tasks
@@ -80,7 +81,10 @@ def agar_background(
     bg = local_background(roi, usable, cell, params.color_threshold)
     if rim is None or params.rim_band_mm <= 0:
         return bg
-    found = rim_profile(roi, rim, rim_band_px(params)) if profile is None else profile.result()
+    if profile is None:
+        found = rim_profile(roi, rim, rim_band_px(params), float(params.px_per_mm or 0.0))
+    else:
+        found = profile.result()
     return with_radial_rim(bg, found)
 
 

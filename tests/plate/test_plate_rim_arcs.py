@@ -95,7 +95,9 @@ def test_ring_lines_of_a_lid_on_a_webcam_frame_are_not_colonies(
     with_arcs = score(analyze_plate(frame))
     monkeypatch.setattr(plate, "rim_arcs", lambda c, index, a, rim, p: np.zeros(len(index), bool))
     without = score(analyze_plate(frame))
-    assert with_arcs.false_positives <= 1 < without.false_positives  # type: ignore[attr-defined]
+    # the pieces the opening leaves of the blurred band are colonies without the arc test
+    assert with_arcs.false_positives <= 1  # type: ignore[attr-defined]
+    assert with_arcs.false_positives < without.false_positives  # type: ignore[attr-defined]
     assert with_arcs.found == without.found  # type: ignore[attr-defined]
 
 
