@@ -148,21 +148,28 @@ def on_ring_lines(
     if len(index) == 0 or not which.any():
         return online
     polar = _Polar.of(contours, index, rim)
+    tested = np.flatnonzero(which & polar.near(px_per_mm))
+    if tested.size == 0:
+        return online
     cx, cy, _ = (float(v) for v in rim)
     h, w = unopened.shape
+    # every radius each tested body spans (whole pixels), body after body
+    inner = np.floor(np.minimum.reduceat(polar.rho, polar.starts)[tested])
+    outer = np.ceil(np.maximum.reduceat(polar.rho, polar.starts)[tested])
+    spans = (outer - inner).astype(np.intp) + 1
+    first = np.cumsum(spans) - spans
+    body = np.repeat(np.arange(tested.size), spans)
+    radii = (inner[body] + np.arange(spans.sum()) - first[body])[:, None]
     beyond = np.arange(1.0, max(LINE_BEYOND_MM * px_per_mm, 2.0) + 1.0)  # px along the arc
-    ends = np.split(polar.turn, polar.starts[1:])
-    radii_of = np.split(polar.rho, polar.starts[1:])
-    for b in np.flatnonzero(which & polar.near(px_per_mm)).tolist():
-        rho = radii_of[b]
-        radii = np.arange(np.floor(rho.min()), np.ceil(rho.max()) + 1.0)[:, None]
-        covered = []
-        for end, side in ((ends[b].max(), 1.0), (ends[b].min(), -1.0)):
-            angle = polar.mean[b] + end + side * beyond / np.maximum(radii, 1.0)
-            x = np.clip(np.rint(cx + radii * np.cos(angle)).astype(np.intp), 0, w - 1)
-            y = np.clip(np.rint(cy + radii * np.sin(angle)).astype(np.intp), 0, h - 1)
-            covered.append(np.count_nonzero(unopened[y, x]) / x.size)
-        online[b] = min(covered) >= LINE_SHARE
+    covered = []
+    for reduce, side in ((np.maximum, 1.0), (np.minimum, -1.0)):
+        end = polar.mean[tested] + reduce.reduceat(polar.turn, polar.starts)[tested]
+        angle = end[body][:, None] + side * beyond / np.maximum(radii, 1.0)
+        x = np.clip(np.rint(cx + radii * np.cos(angle)).astype(np.intp), 0, w - 1)
+        y = np.clip(np.rint(cy + radii * np.sin(angle)).astype(np.intp), 0, h - 1)
+        hits = np.count_nonzero(unopened[y, x], axis=1)
+        covered.append(np.add.reduceat(hits, first) / (spans * beyond.size))
+    online[tested] = np.minimum(*covered) >= LINE_SHARE
     return online
 
 
