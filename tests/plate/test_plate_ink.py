@@ -77,7 +77,7 @@ def test_a_plate_of_grey_colonies_keeps_its_pairs(monkeypatch: pytest.MonkeyPatc
 DARK_AGAR_BGR = np.array([60.0, 66.0, 70.0])  # a dark plate's agar, as the 2048 px AGAR photos
 
 
-def _faint_bodies(dot_bgr: np.ndarray, dotted: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def _faint_bodies(dot_bgr: np.ndarray, dotted: bool = True) -> tuple[np.ndarray, float]:
     """``ink_bodies`` of one body of radius 30 px (12 px/mm) on the dark agar: a dot-matrix
     character's dots blurred into one body by the faint pass (dots of 2 px radius, 7 px apart,
     of the colour ``dot_bgr``), or the same darkening spread evenly over it; and the body's
@@ -103,7 +103,7 @@ def _faint_bodies(dot_bgr: np.ndarray, dotted: bool = True) -> tuple[np.ndarray,
         px_per_mm=12.0, min_colony_area_px=10.0, max_colony_area_px=1e6, min_width_px=1.0
     )
     bodies = measure_bodies(list(contours), disc * 255, np.zeros(1, bool), params, {})
-    darkening = 1.0 - roi[disc > 0].astype(float).sum() / (DARK_AGAR_BGR.sum() * disc.sum())
+    darkening = 1.0 - float(roi[disc > 0].astype(float).sum() / (DARK_AGAR_BGR.sum() * disc.sum()))
     return plate_ink.ink_bodies(roi, background, bodies, np.ones(1, bool), 12.0), darkening
 
 

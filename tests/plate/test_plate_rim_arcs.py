@@ -120,7 +120,7 @@ def test_a_piece_of_a_ring_line_that_goes_on_past_both_its_ends_is_found() -> No
 def test_a_colony_on_a_thin_ring_line_or_at_the_rim_alone_is_kept() -> None:
     line = _arc(42.0, 0.3, 60.0, at=80.0)
     colony = _disc(42.0, 2.0, at_deg=110.0)
-    # the line covers 0.3 of the colony's 2 mm radial span past its ends
+    # past its ends the 0.3 mm line covers 0.15 of the colony's 2 mm radial span
     assert not _ring_line_test(colony, cv2.bitwise_or(line, colony))
     assert not _ring_line_test(colony, colony)  # nothing beyond it
     # a band as wide as the colony, 15 mm inside the rim: no ring line there
