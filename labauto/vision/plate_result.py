@@ -71,7 +71,8 @@ class PlateResult:
     """Everything :func:`analyze_plate` found on one plate.
 
     ``rejected`` counts the objects dropped per reason (dust, large, thin, elongated, stroke,
-    ink, sliver, rim); ``stage_ms`` is the time taken per stage of :func:`analyze_plate`
+    rim_arc, ring_line, ink, sliver, rim); ``stage_ms`` is the time taken per stage of
+    :func:`analyze_plate`
     (``dish``: dish and usable area; ``objects``: segmentation, contours and D_alpha;
     ``measures``: artefact tests and waists; ``classes``: mixed-colony test, merged counts and
     the result). Both are diagnostic and not part of the JSON.
