@@ -136,7 +136,7 @@ from labauto.vision.plate_objects import (
 )
 from labauto.vision.plate_params import PlateParams
 from labauto.vision.plate_result import Colony, PlateResult
-from labauto.vision.plate_rim_arcs import on_ring_lines, rim_arcs
+from labauto.vision.plate_rim_arcs import RimPolar, on_ring_lines, rim_arcs
 
 __all__ = [
     "Colony",
@@ -214,12 +214,13 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     ppm = float(params.px_per_mm or 0.0)
     arc = np.zeros(len(bodies.index), bool)
     if rim is not None:  # pieces of the lid's and the wall's ring lines: never a chain
-        arc = rim_arcs(contours, bodies.index, bodies.area, rim, ppm)
+        polar = RimPolar.of(contours, bodies.index, rim)
+        arc = rim_arcs(polar, bodies.area, ppm)
         if (arc & ~bodies.stroke).any():
             rejected["rim_arc"] = int((arc & ~bodies.stroke).sum())
         bodies.stroke |= arc
         if objects.unopened is not None:  # a piece of a line that goes on past both its ends
-            line = on_ring_lines(contours, bodies.index, ~bodies.stroke, rim, ppm, objects.unopened)
+            line = on_ring_lines(polar, ~bodies.stroke, ppm, objects.unopened)
             if line.any():
                 rejected["ring_line"] = int(line.sum())
                 bodies.stroke |= line

@@ -69,25 +69,63 @@ LINE_BEYOND_MM = 1.5
 LINE_SHARE = 0.6
 
 
-def rim_arcs(
-    contours: list[np.ndarray],
-    index: np.ndarray,
-    area: np.ndarray,
-    rim: Circle,
-    px_per_mm: float,
-) -> np.ndarray:
+@dataclass(frozen=True)
+class RimPolar:
+    """The bodies' outline points in the dish's polar coordinates, body after body.
+
+    ``rho`` is each point's distance from the usable circle's centre ``(cx, cy)``, ``turn``
+    its angle from its body's mean direction (radians, in -pi..pi: no wrap at +-pi for a
+    body), ``mean`` that direction per body; ``starts`` and ``lengths`` give each body's run of
+    points. Both rim tests read it: :func:`rim_arcs` and :func:`on_ring_lines`.
+    """
+
+    points: np.ndarray
+    rho: np.ndarray
+    turn: np.ndarray
+    mean: np.ndarray
+    starts: np.ndarray
+    lengths: np.ndarray
+    rim: tuple[float, float, float]
+
+    @classmethod
+    def of(cls, contours: list[np.ndarray], index: np.ndarray, rim: Circle) -> RimPolar:
+        """The outlines of the bodies (``contours[index]``, Nx1x2 int, ROI pixels) round the
+        usable circle ``rim = (cx, cy, r)`` (ROI pixels)."""
+        cx, cy, r = (float(v) for v in rim)
+        kept = [contours[k] for k in index.tolist()]
+        lengths = np.array([len(c) for c in kept], np.intp)
+        starts = np.cumsum(lengths) - lengths
+        points = (
+            np.concatenate(kept).reshape(-1, 2).astype(np.float64) if kept else np.zeros((0, 2))
+        )
+        dx, dy = points[:, 0] - cx, points[:, 1] - cy
+        phi = np.arctan2(dy, dx)
+        mean = np.zeros(0)
+        if kept:
+            mean = np.arctan2(
+                np.add.reduceat(np.sin(phi), starts), np.add.reduceat(np.cos(phi), starts)
+            )
+        turn = np.angle(np.exp(1j * (phi - np.repeat(mean, lengths))))
+        return cls(points, np.hypot(dx, dy), turn, mean, starts, lengths, (cx, cy, r))
+
+    def __len__(self) -> int:
+        return len(self.lengths)
+
+    def near(self, px_per_mm: float) -> np.ndarray:
+        """Per body: it lies wholly within ``BAND_MM`` of the rim."""
+        inmost = np.minimum.reduceat(self.rho, self.starts)
+        return inmost >= self.rim[2] - BAND_MM * px_per_mm
+
+
+def rim_arcs(polar: RimPolar, area: np.ndarray, px_per_mm: float) -> np.ndarray:
     """True for every body that is an arc along the rim (see the module docstring).
 
     Parameters
     ----------
-    contours : list of ndarray
-        All contours (Nx1x2 int, ROI pixels).
-    index : ndarray of int
-        The contour of each body.
+    polar : RimPolar
+        The bodies' outlines round the usable circle.
     area : ndarray of float
         Each body's area (pixels).
-    rim : tuple of float
-        The usable circle ``(cx, cy, r)`` (ROI pixels).
     px_per_mm : float
         Scale of the ROI.
 
@@ -96,9 +134,8 @@ def rim_arcs(
     ndarray of bool
         One entry per body.
     """
-    if len(index) == 0:
+    if len(polar) == 0:
         return np.zeros(0, bool)
-    polar = _Polar.of(contours, index, rim)
     rho, starts, lengths = polar.rho, polar.starts, polar.lengths
     near = polar.near(px_per_mm)
     radial = np.maximum.reduceat(rho, starts) - np.minimum.reduceat(rho, starts)
@@ -116,12 +153,7 @@ def rim_arcs(
 
 
 def on_ring_lines(
-    contours: list[np.ndarray],
-    index: np.ndarray,
-    which: np.ndarray,
-    rim: Circle,
-    px_per_mm: float,
-    unopened: np.ndarray,
+    polar: RimPolar, which: np.ndarray, px_per_mm: float, unopened: np.ndarray
 ) -> np.ndarray:
     """True for every body (of those where ``which`` is true) that is a piece of a ring line.
 
@@ -132,7 +164,7 @@ def on_ring_lines(
 
     Parameters
     ----------
-    contours, index, rim, px_per_mm
+    polar, px_per_mm
         As for :func:`rim_arcs`.
     which : ndarray of bool
         The bodies to test (one entry per body).
@@ -144,14 +176,13 @@ def on_ring_lines(
     ndarray of bool
         One entry per body.
     """
-    online = np.zeros(len(index), bool)
-    if len(index) == 0 or not which.any():
+    online = np.zeros(len(polar), bool)
+    if len(polar) == 0 or not which.any():
         return online
-    polar = _Polar.of(contours, index, rim)
     tested = np.flatnonzero(which & polar.near(px_per_mm))
     if tested.size == 0:
         return online
-    cx, cy, _ = (float(v) for v in rim)
+    cx, cy, _ = polar.rim
     h, w = unopened.shape
     # every radius each tested body spans (whole pixels), body after body
     inner = np.floor(np.minimum.reduceat(polar.rho, polar.starts)[tested])
@@ -171,42 +202,3 @@ def on_ring_lines(
         covered.append(np.add.reduceat(hits, first) / (spans * beyond.size))
     online[tested] = np.minimum(*covered) >= LINE_SHARE
     return online
-
-
-@dataclass(frozen=True)
-class _Polar:
-    """The bodies' outline points in the dish's polar coordinates, body after body.
-
-    ``rho`` is each point's distance from the usable circle's centre, ``turn`` its angle
-    from its body's mean direction (radians, in -pi..pi: no wrap at +-pi for a body), ``mean``
-    that direction per body; ``starts`` and ``lengths`` give each body's run of points.
-    """
-
-    points: np.ndarray
-    rho: np.ndarray
-    turn: np.ndarray
-    mean: np.ndarray
-    starts: np.ndarray
-    lengths: np.ndarray
-    rim_radius: float
-
-    @classmethod
-    def of(cls, contours: list[np.ndarray], index: np.ndarray, rim: Circle) -> _Polar:
-        """The outlines of the bodies (``contours[index]``) round the circle ``rim``."""
-        cx, cy, r = (float(v) for v in rim)
-        kept = [contours[k] for k in index.tolist()]
-        lengths = np.array([len(c) for c in kept])
-        starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
-        points = np.concatenate(kept).reshape(-1, 2).astype(np.float64)
-        dx, dy = points[:, 0] - cx, points[:, 1] - cy
-        phi = np.arctan2(dy, dx)
-        mean = np.arctan2(
-            np.add.reduceat(np.sin(phi), starts), np.add.reduceat(np.cos(phi), starts)
-        )
-        turn = np.angle(np.exp(1j * (phi - np.repeat(mean, lengths))))
-        return cls(points, np.hypot(dx, dy), turn, mean, starts, lengths, r)
-
-    def near(self, px_per_mm: float) -> np.ndarray:
-        """Per body: it lies wholly within ``BAND_MM`` of the rim."""
-        inmost = np.minimum.reduceat(self.rho, self.starts)
-        return inmost >= self.rim_radius - BAND_MM * px_per_mm

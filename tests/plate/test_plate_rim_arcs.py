@@ -11,7 +11,7 @@ import pytest
 import labauto.vision.plate as plate
 from labauto.synthetic.plates import generate_plate, score_plate
 from labauto.vision.plate import analyze_plate
-from labauto.vision.plate_rim_arcs import on_ring_lines, rim_arcs
+from labauto.vision.plate_rim_arcs import RimPolar, on_ring_lines, rim_arcs
 
 PPM = 12.0  # px per mm
 RIM = (600.0, 600.0, 540.0)  # the usable circle: 45 mm
@@ -44,7 +44,7 @@ def _disc(radius_mm: float, diameter_mm: float, at_deg: float = 0.0) -> np.ndarr
 def _test(masks: list[np.ndarray]) -> np.ndarray:
     contours = [_contour(m) for m in masks]
     area = np.array([float(np.count_nonzero(m)) for m in masks])
-    return rim_arcs(contours, np.arange(len(contours)), area, RIM, PPM)
+    return rim_arcs(RimPolar.of(contours, np.arange(len(contours)), RIM), area, PPM)
 
 
 def test_pieces_and_arcs_along_the_rim_are_found_and_colonies_are_not() -> None:
@@ -67,7 +67,7 @@ def test_two_colonies_touching_along_the_rim_are_not_an_arc() -> None:
 
 
 def test_no_body_no_arc() -> None:
-    assert rim_arcs([], np.zeros(0, np.intp), np.zeros(0), RIM, PPM).shape == (0,)
+    assert rim_arcs(RimPolar.of([], np.zeros(0, np.intp), RIM), np.zeros(0), PPM).shape == (0,)
 
 
 @pytest.mark.parametrize(("seed", "gap_mm"), [(12, 0.5), (11, 0.8)])
@@ -93,7 +93,7 @@ def test_ring_lines_of_a_lid_on_a_webcam_frame_are_not_colonies(
         return score_plate(truth, result.colonies, scale=f)  # type: ignore[attr-defined]
 
     with_arcs = score(analyze_plate(frame))
-    monkeypatch.setattr(plate, "rim_arcs", lambda c, index, a, rim, p: np.zeros(len(index), bool))
+    monkeypatch.setattr(plate, "rim_arcs", lambda polar, area, p: np.zeros(len(area), bool))
     without = score(analyze_plate(frame))
     # the pieces the opening leaves of the blurred band are colonies without the arc test
     assert with_arcs.false_positives <= 1  # type: ignore[attr-defined]
@@ -104,7 +104,7 @@ def test_ring_lines_of_a_lid_on_a_webcam_frame_are_not_colonies(
 def _ring_line_test(body: np.ndarray, unopened: np.ndarray, which: bool = True) -> bool:
     contour = _contour(body)
     index = np.zeros(1, np.intp)
-    found = on_ring_lines([contour], index, np.array([which]), RIM, PPM, unopened)
+    found = on_ring_lines(RimPolar.of([contour], index, RIM), np.array([which]), PPM, unopened)
     return bool(found[0])
 
 
@@ -130,7 +130,7 @@ def test_a_colony_on_a_thin_ring_line_or_at_the_rim_alone_is_kept() -> None:
 
 def test_no_body_no_ring_line() -> None:
     empty = np.zeros((1200, 1200), np.uint8)
-    found = on_ring_lines([], np.zeros(0, np.intp), np.zeros(0, bool), RIM, PPM, empty)
+    found = on_ring_lines(RimPolar.of([], np.zeros(0, np.intp), RIM), np.zeros(0, bool), PPM, empty)
     assert found.shape == (0,)
 
 
