@@ -183,7 +183,9 @@ def objects_by_segmentation(
         # colonies touching them come apart from them
         k = 2 * math.floor(params.open_mm * float(params.px_per_mm or 0.0) / 2) + 1  # odd
         if k >= 3:
-            fg, dots = with_erased_colonies(fg, open_thin_lines(fg, k), roi, background, k)
+            fg, dots = with_erased_colonies(
+                fg, open_thin_lines(fg, k, roi, background), roi, background, k
+            )
     # outer boundaries of every body, also of bodies lying in another's hole (a colony inside
     # the meniscus ring): RETR_CCOMP puts all outer boundaries at the top level
     traced, hierarchy = cv2.findContours(fg, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)

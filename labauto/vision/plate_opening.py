@@ -20,7 +20,12 @@ from labauto.vision.plate_ink import INK_PIXEL_DARKER
 _FRAGMENT_RATIO = 0.5  # a piece is a fragment when the opening took this much around it
 
 
-def open_thin_lines(fg: np.ndarray, size: int) -> np.ndarray:
+def open_thin_lines(
+    fg: np.ndarray,
+    size: int,
+    image: np.ndarray | None = None,
+    background: np.ndarray | None = None,
+) -> np.ndarray:
     """``fg`` opened with a disc of ``size`` px, without the fragments of thick strokes.
 
     The opening removes what is thinner than the disc: the lid's and the wall's edges, hairs,
@@ -32,6 +37,16 @@ def open_thin_lines(fg: np.ndarray, size: int) -> np.ndarray:
     Limit: a stroke nearly as wide as the disc, or a blot on it wider than ~1.3 times the
     stroke, leaves pieces this rule keeps; black and blue ones are caught later as ink
     (:mod:`labauto.vision.plate_ink`).
+
+    With ``image`` and ``background`` (the agar's colour behind it), a fragment whose departure
+    from the agar is mostly hue (:func:`hued`) is kept: a pigmented colony that the lid's
+    lines or a label's print run into is flanked by them as a stroke's piece is, but lines and
+    print are grey or black. On the AGAR photographs 21 of 475 fragments held a boxed colony,
+    all yellow; with hued fragments kept, matched 1590 -> 1596, reported 1646 -> 1653 (F1
+    0.900 -> 0.902, median count error 8.8 -> 7.3 %); at 7 px/mm matched 1584 -> 1590 (F1
+    0.890 -> 0.892), at 4.5 px/mm 1562 -> 1563; phone-counts unchanged at all three scales.
+    Keeping every fragment found 28 more for 72 more reported (F1 0.898, phone-counts 2.5 ->
+    3.2 %); a ratio of 1.0 in place of 0.5, 20 for 43 (F1 0.901).
     """
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
     opened = cv2.morphologyEx(fg, cv2.MORPH_OPEN, disc)
@@ -52,6 +67,9 @@ def open_thin_lines(fg: np.ndarray, size: int) -> np.ndarray:
     near = np.bincount(around[ry, rx], minlength=n)
     fragment = near > _FRAGMENT_RATIO * area
     fragment[0] = False
+    if fragment.any() and image is not None and background is not None:
+        colour, agar = (_label_means(im, xs, ys, piece, n) for im in (image, background))
+        fragment &= ~hued(colour, agar)
     if fragment.any():
         dropped = fragment[piece]
         opened[ys[dropped], xs[dropped]] = 0
@@ -126,14 +144,12 @@ def with_erased_colonies(
         return opened, None
     x, y, label = x[erased], y[erased], label[erased]
     colour, agar = (_label_means(im, x, y, label, n) for im in (image, background))
-    departure = colour - agar
-    hue = departure - departure.mean(axis=1, keepdims=True)
-    hued = np.linalg.norm(hue, axis=1) >= _HUE_SHARE * np.linalg.norm(departure, axis=1)
+    coloured = hued(colour, agar)
     # a colony under a millimetre is thin and lets light through; dust and printed dots are
     # opaque: they let through as little light as ink does
     opaque = colour.sum(axis=1) <= (1.0 - INK_PIXEL_DARKER) * agar.sum(axis=1)
-    dot = _lone_dots(fg, x, y, label, disc_px, n) & ~opaque & ~hued
-    keep = (hued | dot)[label]
+    dot = _lone_dots(fg, x, y, label, disc_px, n) & ~opaque & ~coloured
+    keep = (coloured | dot)[label]
     if not keep.any():
         return opened, None
     out = opened.copy()
@@ -144,6 +160,15 @@ def with_erased_colonies(
         mine = dot[label]
         dots[y[mine], x[mine]] = 255
     return out, dots
+
+
+def hued(colour: np.ndarray, agar: np.ndarray) -> np.ndarray:
+    """Per row of ``colour`` and ``agar`` (n x 3, B, G, R): the departure of the one from the
+    other is at least ``_HUE_SHARE`` hue, its part across the grey axis (each channel minus
+    the mean of the three), not brightness. Lines, print and dust are grey or black."""
+    departure = colour - agar
+    hue = departure - departure.mean(axis=1, keepdims=True)
+    return np.linalg.norm(hue, axis=1) >= _HUE_SHARE * np.linalg.norm(departure, axis=1)
 
 
 def _label_means(

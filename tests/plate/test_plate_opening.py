@@ -81,3 +81,22 @@ def test_a_lone_grey_dot_comes_back_and_a_line_s_pieces_do_not() -> None:
     assert cv2.countNonZero(dots) == cv2.countNonZero(fg[50:71, 50:71])
     assert not kept[150, 100:300].any()
     assert kept[250, 328] == 0 and kept[250, 300] == 255
+
+
+def test_a_pigmented_colony_a_stroke_runs_into_is_no_fragment_of_it() -> None:
+    # a grey stroke with a grey blot (a stroke's fragment) and the same stroke through a yellow
+    # colony of the same size: both are pieces flanked by the stroke, only the blot is grey
+    agar = (150, 190, 205)
+    img = np.full((200, 300, 3), agar, np.uint8)
+    fg = np.zeros((200, 300), np.uint8)
+    for y, colour in ((50, (100, 140, 155)), (150, (110, 185, 210))):
+        cv2.line(fg, (20, y), (280, y), 255, 5)
+        cv2.line(img, (20, y), (280, y), (100, 140, 155), 5)
+        cv2.circle(fg, (150, y), 5, 255, -1)
+        cv2.circle(img, (150, y), 5, colour, -1)
+    background = np.full_like(img, agar)
+    blind = open_thin_lines(fg, 9)
+    assert blind[50, 150] == 0 and blind[150, 150] == 0  # without colour: both fragments
+    seen = open_thin_lines(fg, 9, img, background)
+    assert seen[50, 150] == 0 and seen[150, 150] == 255
+    assert cv2.connectedComponents(seen)[0] - 1 == 1
