@@ -31,8 +31,9 @@ Pipeline and the choices it makes where the paper leaves room:
    background, :mod:`labauto.vision.plate_faint`) and ring colonies (a round edge with little
    body inside, by the circular Hough transform, :mod:`labauto.vision.plate_rings`) are added to
    that foreground. Lines thinner than ``open_mm`` are opened away so colonies touching them
-   come apart, and fragments of thick strokes are dropped; small colonies the opening erased
-   whole come back when hued, or lone and translucent (:mod:`labauto.vision.plate_opening`).
+   come apart, and fragments of thick strokes are dropped (not a hued one: a colony they run
+   into); small colonies the opening erased whole come back when hued, or lone and translucent
+   (:mod:`labauto.vision.plate_opening`).
    Outer contours of all bodies, also those lying in another's hole, are traced in the
    8-neighbourhood (OpenCV). The gradient at each contour point is a 5x5 Sobel of the deviation
    image: it points into every object, whatever its colour. D_alpha, the centroid and the
