@@ -22,12 +22,16 @@ Two sets, scored as ``realplates/README.md`` says:
 For both sets the table gives every plate and the totals: median count error over the plates and
 how many are over 15 %. The images are read by ``cv2.imread`` (EXIF orientation applied). Run:
 ``python benchmarks/bench_real_plates.py [--data DIR] [--set agar-boxes|phone-counts] [--only ID
-...] [--camera-scale PX_PER_MM] [--param NAME=VALUE ...]``. ``--camera-scale`` first resamples
-every photo (area averaging, or bilinear up) so that its dish is at that scale, as a webcam would
-see it; ``--param`` sets a ``PlateParams`` field for the run (its value read as YAML), to measure
-a change of a default. The data are development data, not part of labauto; without them the
-script says where it looked and stops (exit status 2 when ``--data`` named the folder, 0 when the
-default place is simply absent, so ``make bench`` goes on).
+...] [--camera-scale PX_PER_MM] [--param NAME=VALUE ...] [--perturb NAME[:VALUE]] [--shifts N]``.
+``--camera-scale`` first resamples every photo (area averaging, or bilinear up) so that its dish is
+at that scale, as a webcam would see it; ``--param`` sets a ``PlateParams`` field for the run (its
+value read as YAML), to measure a change of a default. ``--shifts N`` scores the sets N times, the
+k-th time with every photo cut by k pixels at its top and left (the boxes moved with it): a plate
+does not lie at the same pixel twice, and the spread of the totals over these runs is how much of a
+difference between two versions is the analysis's own jitter (the per-plate tables are printed for
+the first run only). The data are development data, not part of labauto; without them the script
+says where it looked and stops (exit status 2 when ``--data`` named the folder, 0 when the default
+place is simply absent, so ``make bench`` goes on).
 """
 
 from __future__ import annotations
@@ -38,7 +42,7 @@ import math
 import sys
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -70,11 +74,14 @@ class BoxScore:
 @dataclass(frozen=True)
 class RunOptions:
     """How the photos are analysed: ``params`` (None: the defaults), resampled to
-    ``camera_scale`` px/mm first when given, and changed by ``perturb`` when given."""
+    ``camera_scale`` px/mm first when given, changed by ``perturb`` when given, and cut by
+    ``shift`` pixels at the top and left."""
 
     params: PlateParams | None = None
     camera_scale: float | None = None
     perturb: Perturbation | None = None
+    shift: int = 0  # pixels cut at the photo's top and left (after the perturbation)
+    rows: bool = True  # print a row per plate
 
 
 def read_boxes(label_file: Path, width: int, height: int) -> np.ndarray:
@@ -214,6 +221,14 @@ def _read(path: Path, camera_scale: float | None) -> np.ndarray | None:
     )
 
 
+def shifted(image: np.ndarray, boxes: np.ndarray, shift: int) -> tuple[np.ndarray, np.ndarray]:
+    """The photo without its top and left ``shift`` pixels (the plate moved up and left), and
+    its boxes ``(x0, y0, x1, y1)`` moved with it."""
+    if shift <= 0:
+        return image, boxes
+    return image[shift:, shift:], boxes - shift
+
+
 def _analyze(
     image: np.ndarray | None, params: PlateParams | None
 ) -> tuple[PlateResult | None, float, str]:
@@ -229,11 +244,12 @@ def _analyze(
 
 def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[str, float]:
     """Score the agar-boxes set; print one row per plate and the totals."""
-    print(f"agar-boxes ({folder})")
+    print(f"agar-boxes ({folder})" + (f", shifted {options.shift} px" if options.shift else ""))
     header = f"{'plate':>8s} {'size':>10s} {'truth':>6s} {'found':>6s} {'matched':>8s} "
     header += f"{'P':>5s} {'R':>5s} {'count err':>9s} {'picks':>5s} {'2+':>3s} {'ms':>7s}"
-    print(header)
-    print("-" * len(header))
+    if options.rows:
+        print(header)
+        print("-" * len(header))
     totals = [0, 0, 0, 0, 0, 0]
     errors, times = [], []
     missed: dict[str, Counter[str]] = {cause: Counter() for cause in MISSED}
@@ -248,6 +264,7 @@ def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[st
         if options.perturb is not None:
             image = options.perturb.image(image)
             boxes = options.perturb.boxes(boxes, w, h)
+        image, boxes = shifted(image, boxes, options.shift)
         result, ms, why = _analyze(image, options.params)
         if result is None:
             score = BoxScore(0, len(boxes), 0, missed={MISSED[0]: len(boxes)})
@@ -266,6 +283,8 @@ def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[st
             by_edge[name][1] += n_matched
         p = score.matched / score.reported if score.reported else 0.0
         r = score.matched / score.truth
+        if not options.rows:
+            continue
         print(
             f"{image_path.stem:>8s} {w:>4d}x{h:<5d} {score.truth:6d} {score.reported:6d} "
             f"{score.matched:8d} {p:5.2f} {r:5.2f} {100 * err:8.1f}% {score.offered:5d} "
@@ -315,10 +334,11 @@ def _count_line(summary: dict[str, float]) -> str:
 
 def run_phone_counts(folder: Path, only: set[str], options: RunOptions) -> dict[str, float]:
     """Score the phone-counts set; print one row per plate and the totals."""
-    print(f"phone-counts ({folder})")
+    print(f"phone-counts ({folder})" + (f", shifted {options.shift} px" if options.shift else ""))
     header = f"{'plate':>9s} {'size':>10s} {'truth':>6s} {'found':>6s} {'count err':>9s} {'ms':>7s}"
-    print(header)
-    print("-" * len(header))
+    if options.rows:
+        print(header)
+        print("-" * len(header))
     errors, times, complete = [], [], []
     with open(folder / "counts.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
@@ -330,12 +350,16 @@ def run_phone_counts(folder: Path, only: set[str], options: RunOptions) -> dict[
         image = _read(folder / "images" / row["image"], options.camera_scale)
         if image is not None and options.perturb is not None:
             image = options.perturb.image(image)
+        if image is not None:
+            image, _ = shifted(image, np.zeros((0, 4)), options.shift)
         result, ms, why = _analyze(image, options.params)
         found = result.counts["colonies_estimate"] if result is not None else 0
         err = abs(found - truth) / truth
         errors.append(err)
         times.append(ms)
         complete.append("not counted" not in row.get("note", ""))
+        if not options.rows:
+            continue
         size = f"{result.width}x{result.height}" if result is not None else "-"
         note = f"  [{row['note']}]" if row.get("note") else ""
         print(
@@ -396,7 +420,16 @@ def main() -> int:
         metavar="NAME[:VALUE]",
         help="change every photo first: rot90, flip, gain:K, gamma:G, wb:B,G,R, jpeg:Q, noise:S",
     )
+    ap.add_argument(
+        "--shifts",
+        type=int,
+        default=1,
+        metavar="N",
+        help="score N times, the k-th with every photo cut by k px at its top and left",
+    )
     args = ap.parse_args()
+    if args.shifts < 1:
+        ap.error(f"--shifts takes a count of 1 or more, got {args.shifts}")
     try:
         options = RunOptions(
             plate_params(args.param),
@@ -417,13 +450,34 @@ def main() -> int:
         return 2 if args.data else 0  # the default place may simply not exist on this machine
     args.data = data
     only = set(args.only)
-    for name in sets:
-        if name == "agar-boxes":
-            run_agar_boxes(args.data / name, only, options)
-        else:
-            run_phone_counts(args.data / name, only, options)
-        print()
+    runs: dict[str, list[dict[str, float]]] = {name: [] for name in sets}
+    for shift in range(args.shifts):
+        run = replace(options, shift=shift, rows=shift == 0)
+        for name in sets:
+            score = run_agar_boxes if name == "agar-boxes" else run_phone_counts
+            runs[name].append(score(args.data / name, only, run))
+            print()
+    if args.shifts > 1:
+        print_spread(runs)
     return 0
+
+
+def print_spread(runs: dict[str, list[dict[str, float]]]) -> None:
+    """Mean, least and largest of each set's totals over the shifted runs."""
+    keys = {"f1": ("F1", 1.0, 3), "median_count_error": ("median count error %", 100.0, 1)}
+    keys["over_15"] = ("plates over 15 %", 1.0, 1)
+    print(f"over {len(next(iter(runs.values())))} shifts (mean, least - largest):")
+    for name, summaries in runs.items():
+        parts = []
+        for key, (label, scale, digits) in keys.items():
+            if key not in summaries[0]:
+                continue
+            values = np.array([summary[key] for summary in summaries]) * scale
+            parts.append(
+                f"{label} {values.mean():.{digits}f} ({values.min():.{digits}f} - "
+                f"{values.max():.{digits}f})"
+            )
+        print(f"  {name}: " + "; ".join(parts))
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+from bench_real_plates import shifted
 from photo_perturb import parse
 
 
@@ -23,6 +24,19 @@ def test_boxes_move_with_the_photo(spec: str) -> None:
     (x0, y0, x1, y1) = change.boxes(np.array([[50.0, 10.0, 80.0, 20.0]]), 90, 60)[0]
     ys, xs = np.nonzero(moved[..., 0])
     assert (xs.min(), ys.min(), xs.max() + 1, ys.max() + 1) == (x0, y0, x1, y1)
+
+
+def test_a_shifted_photo_keeps_its_boxes_on_the_plate() -> None:
+    # the benchmark's --shifts: the photo cut at its top and left, the box moved with it
+    photo = np.zeros((60, 90, 3), np.uint8)
+    photo[10:20, 50:80] = 255
+    boxes = np.array([[50.0, 10.0, 80.0, 20.0]])
+    same, kept = shifted(photo, boxes, 0)
+    assert same is photo and kept is boxes
+    moved, (moved_box,) = shifted(photo, boxes, 3)
+    assert moved.shape == (57, 87, 3)
+    ys, xs = np.nonzero(moved[..., 0])
+    assert (xs.min(), ys.min(), xs.max() + 1, ys.max() + 1) == tuple(moved_box)
 
 
 def test_photometric_changes_keep_boxes_and_change_levels() -> None:
