@@ -252,6 +252,7 @@ def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[st
         print("-" * len(header))
     totals = [0, 0, 0, 0, 0, 0]
     errors, times = [], []
+    counts: dict[str, int] = {}  # colonies reported per plate
     missed: dict[str, Counter[str]] = {cause: Counter() for cause in MISSED}
     by_edge: dict[str, list[int]] = {name: [0, 0] for _, name in EDGE_BANDS}
     for image_path in sorted((folder / "images").glob("*.jpg"), key=lambda p: int(p.stem)):
@@ -272,6 +273,7 @@ def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[st
             score = score_boxes(result, boxes)
         err = abs(score.reported - score.truth) / score.truth
         errors.append(err)
+        counts[image_path.stem] = score.reported
         times.append(ms)
         row = (score.reported, score.truth, score.matched)
         for i, v in enumerate((*row, score.offered, score.offered_multi, score.offered_empty)):
@@ -294,6 +296,7 @@ def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[st
     p = matched / reported if reported else 0.0
     r = matched / truth if truth else 0.0
     summary = {"precision": p, "recall": r, "f1": _f1(p, r), **_count_summary(errors, times)}
+    summary["counts"] = counts
     print(
         f"total: {summary['plates']} plates, {truth} colonies, {reported} reported, {matched} "
         f"matched: precision {p:.3f}, recall {r:.3f}, F1 {summary['f1']:.3f}; "
@@ -340,6 +343,7 @@ def run_phone_counts(folder: Path, only: set[str], options: RunOptions) -> dict[
         print(header)
         print("-" * len(header))
     errors, times, complete = [], [], []
+    counts: dict[str, int] = {}  # colonies reported per plate
     with open(folder / "counts.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     for row in rows:
@@ -356,6 +360,7 @@ def run_phone_counts(folder: Path, only: set[str], options: RunOptions) -> dict[
         found = result.counts["colonies_estimate"] if result is not None else 0
         err = abs(found - truth) / truth
         errors.append(err)
+        counts[stem] = found
         times.append(ms)
         complete.append("not counted" not in row.get("note", ""))
         if not options.rows:
@@ -367,7 +372,7 @@ def run_phone_counts(folder: Path, only: set[str], options: RunOptions) -> dict[
             + (f"  ({why})" if why else "")
             + note
         )
-    summary = _count_summary(errors, times)
+    summary = {**_count_summary(errors, times), "counts": counts}
     print(f"total: {summary['plates']} plates: " + _count_line(summary))
     # a note that smaller colonies were not counted makes the truth short by an unknown amount
     counted = _count_summary([e for e, c in zip(errors, complete, strict=True) if c], times)
@@ -464,7 +469,9 @@ def main() -> int:
 
 def print_spread(runs: dict[str, list[dict[str, float]]]) -> None:
     """Mean, least and largest of each set's totals over the shifted runs."""
-    keys = {"f1": ("F1", 1.0, 3), "median_count_error": ("median count error %", 100.0, 1)}
+    keys = {name: (name, 1.0, 3) for name in ("precision", "recall")}
+    keys["f1"] = ("F1", 1.0, 3)
+    keys["median_count_error"] = ("median count error %", 100.0, 1)
     keys["over_15"] = ("plates over 15 %", 1.0, 1)
     print(f"over {len(next(iter(runs.values())))} shifts (mean, least - largest):")
     for name, summaries in runs.items():
@@ -478,6 +485,17 @@ def print_spread(runs: dict[str, list[dict[str, float]]]) -> None:
                 f"{values.max():.{digits}f})"
             )
         print(f"  {name}: " + "; ".join(parts))
+        # how far each plate's count moves between the runs
+        plates = summaries[0]["counts"]
+        spread = {stem: [summary["counts"][stem] for summary in summaries] for stem in plates}
+        moved = sorted(spread.items(), key=lambda item: max(item[1]) - min(item[1]), reverse=True)
+        worst = ", ".join(f"{stem} {min(c)}-{max(c)}" for stem, c in moved[:5])
+        total = sum(max(c) - min(c) for c in spread.values())
+        changed = sum(max(c) > min(c) for c in spread.values())
+        print(
+            f"    counts moved on {changed} of {len(spread)} plates, by {total} colonies "
+            f"(largest count less least, summed); most: {worst}"
+        )
 
 
 if __name__ == "__main__":
