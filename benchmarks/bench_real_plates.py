@@ -44,6 +44,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -242,8 +243,9 @@ def _analyze(
     return result, (time.perf_counter() - t0) * 1000, ""
 
 
-def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[str, float]:
-    """Score the agar-boxes set; print one row per plate and the totals."""
+def run_agar_boxes(folder: Path, only: set[str], options: RunOptions) -> dict[str, Any]:
+    """Score the agar-boxes set; print one row per plate and the totals, and return them
+    (with ``counts``: the colonies reported per plate)."""
     print(f"agar-boxes ({folder})" + (f", shifted {options.shift} px" if options.shift else ""))
     header = f"{'plate':>8s} {'size':>10s} {'truth':>6s} {'found':>6s} {'matched':>8s} "
     header += f"{'P':>5s} {'R':>5s} {'count err':>9s} {'picks':>5s} {'2+':>3s} {'ms':>7s}"
@@ -335,8 +337,9 @@ def _count_line(summary: dict[str, float]) -> str:
     )
 
 
-def run_phone_counts(folder: Path, only: set[str], options: RunOptions) -> dict[str, float]:
-    """Score the phone-counts set; print one row per plate and the totals."""
+def run_phone_counts(folder: Path, only: set[str], options: RunOptions) -> dict[str, Any]:
+    """Score the phone-counts set; print one row per plate and the totals, and return them
+    (with ``counts``: the colonies reported per plate)."""
     print(f"phone-counts ({folder})" + (f", shifted {options.shift} px" if options.shift else ""))
     header = f"{'plate':>9s} {'size':>10s} {'truth':>6s} {'found':>6s} {'count err':>9s} {'ms':>7s}"
     if options.rows:
@@ -455,7 +458,7 @@ def main() -> int:
         return 2 if args.data else 0  # the default place may simply not exist on this machine
     args.data = data
     only = set(args.only)
-    runs: dict[str, list[dict[str, float]]] = {name: [] for name in sets}
+    runs: dict[str, list[dict[str, Any]]] = {name: [] for name in sets}
     for shift in range(args.shifts):
         run = replace(options, shift=shift, rows=shift == 0)
         for name in sets:
@@ -467,7 +470,7 @@ def main() -> int:
     return 0
 
 
-def print_spread(runs: dict[str, list[dict[str, float]]]) -> None:
+def print_spread(runs: dict[str, list[dict[str, Any]]]) -> None:
     """Mean, least and largest of each set's totals over the shifted runs."""
     keys = {name: (name, 1.0, 3) for name in ("precision", "recall")}
     keys["f1"] = ("F1", 1.0, 3)
