@@ -73,7 +73,9 @@ def open_thin_lines(
     fragment = near > _FRAGMENT_RATIO * area
     fragment[0] = False
     if fragment.any() and image is not None and background is not None:
-        colour, agar = (_label_means(im, xs, ys, piece, n) for im in (image, background))
+        mine = fragment[piece]  # the colours of the fragments' pixels alone
+        fx, fy, fp = xs[mine], ys[mine], piece[mine]
+        colour, agar = (_label_means(im, fx, fy, fp, n) for im in (image, background))
         fragment &= ~hued(colour, agar)
     if fragment.any():
         dropped = fragment[piece]
