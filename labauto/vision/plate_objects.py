@@ -167,6 +167,7 @@ def objects_by_segmentation(
             float(params.px_per_mm or 1.0),
             factor=params.faint_factor,
             min_diameter_mm=params.faint_min_diameter_mm,
+            min_hue_diameter_mm=params.faint_min_hue_diameter_mm,
             max_diameter_mm=params.faint_max_diameter_mm,
             margin_mm=params.rim_band_mm,
             agar_colour=background,

@@ -148,6 +148,9 @@ class PlateParams:
         background this many times the agar's own is foreground; 0 turns the pass off.
     faint_min_diameter_mm, faint_max_diameter_mm : float
         Sizes (as discs) of the faint bodies kept.
+    faint_min_hue_diameter_mm : float
+        Least size of a faint body departing in hue (the search across the grey axis, where
+        the agar's texture is weaker): smaller yellowish colonies are found there.
     find_rings : bool
         Ring colonies (:mod:`labauto.vision.plate_rings`): round edges with little body inside,
         found by the circular Hough transform; False turns the pass off.
@@ -205,6 +208,7 @@ class PlateParams:
     faint_factor: float = 4.0
     faint_min_diameter_mm: float = 2.0
     faint_max_diameter_mm: float = 12.0
+    faint_min_hue_diameter_mm: float = 1.0
     find_rings: bool = True
     rim_band_mm: float = 4.0
     detector: DetectorParams = field(default_factory=lambda: DetectorParams(method="color"))
@@ -247,6 +251,7 @@ class PlateParams:
             "max_colony_diameter_mm",
             "faint_min_diameter_mm",
             "faint_max_diameter_mm",
+            "faint_min_hue_diameter_mm",
         )
         for name in positive:
             value = getattr(self, name)
@@ -265,10 +270,9 @@ class PlateParams:
             raise ValueError(
                 "PlateParams.min_analysis_px_per_mm must not exceed analysis_px_per_mm"
             )
-        if self.faint_min_diameter_mm > self.faint_max_diameter_mm:
-            raise ValueError(
-                "PlateParams.faint_min_diameter_mm must not exceed faint_max_diameter_mm"
-            )
+        for name in ("faint_min_diameter_mm", "faint_min_hue_diameter_mm"):
+            if getattr(self, name) > self.faint_max_diameter_mm:
+                raise ValueError(f"PlateParams.{name} must not exceed faint_max_diameter_mm")
         lo_area, hi_area = self.min_colony_area_px, self.max_colony_area_px
         if lo_area is not None and hi_area is not None and lo_area > hi_area:
             raise ValueError("PlateParams.min_colony_area_px must not exceed max_colony_area_px")

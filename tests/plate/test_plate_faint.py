@@ -6,7 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
+from labauto.synthetic.plates import generate_plate
 from labauto.vision import plate_faint
+from labauto.vision.plate import PlateParams, analyze_plate
 from labauto.vision.plate_faint import faint_bodies
 
 PX_PER_MM = 10.0
@@ -87,3 +89,47 @@ def test_a_colony_departing_in_hue_only_is_found_through_the_agars_texture() -> 
     assert overlap >= 0.8 * np.count_nonzero(disc) and np.count_nonzero(body) <= 1.4 * overlap
     # the texture alone is no colony, in either part of the deviation
     assert not found(_textured_agar_with_hued_disc((0.0, 0.0, 0.0)), chroma=True).any()
+
+
+def _agar_with_small_hued_disc(diameter_mm: float) -> np.ndarray:
+    """600 px of flat agar (10 px/mm, sensor noise) with a disc of ``diameter_mm`` that is
+    yellower (12 levels less blue, 4 more red), as the small faint colonies of AGAR plates
+    11761, 11924 and 12033."""
+    disc = np.zeros((600, 600), np.float32)
+    cv2.circle(disc, (300, 300), round(diameter_mm * PX_PER_MM / 2), 1.0, -1, cv2.LINE_AA)
+    img = np.empty((600, 600, 3), np.float32)
+    img[:] = AGAR_BGR
+    img += disc[..., None] * np.float32([-12.0, 0.0, 4.0])
+    img += np.random.default_rng(2).normal(0.0, 2.0, img.shape)
+    return np.clip(img + 0.5, 0, 255).astype(np.uint8)
+
+
+def test_a_small_colony_departing_in_hue_is_found_below_the_grey_searchs_size() -> None:
+    usable = np.zeros((600, 600), np.uint8)
+    cv2.circle(usable, (300, 300), 290, 255, -1)
+    none = np.zeros_like(usable)
+    img = _agar_with_small_hued_disc(1.4)
+
+    def found(**kwargs: float) -> bool:
+        mask = faint_bodies(img, usable, none, PX_PER_MM, margin_mm=1.0, **kwargs)
+        return bool(mask[300, 300])
+
+    assert found()  # the hue search keeps bodies from 1 mm on
+    assert not found(min_hue_diameter_mm=2.0)  # the grey search's least size would miss it
+
+
+def test_a_dark_speck_smeared_by_the_smoothing_is_no_faint_body(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # the generator's dust on amber agar: a dark speck about 0.5 mm across at (855, 402),
+    # too small for a colony; smoothed, it departs in hue as a disc of about a millimetre
+    img, truth = generate_plate(1000, agar="amber")
+    params = PlateParams(region=(*truth.dish.center, truth.dish.radius))
+
+    def reported_at_speck() -> bool:
+        centroids = np.array([c.centroid for c in analyze_plate(img, params).colonies])
+        return bool((np.hypot(*(centroids - (855.0, 402.0)).T) < 4.0).any())
+
+    assert not reported_at_speck()
+    monkeypatch.setattr(plate_faint, "_MIN_SPREAD", 0.0)  # without the test: a colony
+    assert reported_at_speck()
