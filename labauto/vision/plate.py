@@ -128,6 +128,7 @@ from labauto.vision.plate_bodies import (
     mix_scores,
     pair_counts,
 )
+from labauto.vision.plate_cores import core_counts
 from labauto.vision.plate_ink import ink_bodies, without_ink
 from labauto.vision.plate_objects import (
     agar_background,
@@ -273,6 +274,9 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     large &= bodies.r_in >= LARGE_BODY_RATIO * single_r_in
     mix, spots = mix_scores(roi, bodies, des | large, params)
     counts = np.where(large, counts + spots, counts)
+    if objects.departure is not None:  # a clump without waists: its colonies' cores
+        clump = ~bodies.stroke & ~des & ~inked
+        counts = np.maximum(counts, core_counts(bodies, objects.departure, clump, single_r_in))
     mix, spotted = np.where(des, mix, 0.0), spots > 0  # the mixed score is a DES's alone
 
     colonies: list[Colony] = []

@@ -105,8 +105,8 @@ class Objects:
     ``doubtful`` marks the objects that are counted but never offered for picking: lone dots
     the opening erased and that came back without a hue of their own
     (:func:`labauto.vision.plate_opening.with_erased_colonies`). ``foreground`` is eq. 1's
-    final mask, ``unopened`` the same before thin lines were opened away (both None for the
-    generic detector).
+    final mask, ``unopened`` the same before thin lines were opened away, ``departure`` eq. 1's
+    deviation from the agar's background (all three None for the generic detector).
     """
 
     contours: list[np.ndarray]
@@ -117,6 +117,7 @@ class Objects:
     foreground: np.ndarray | None
     doubtful: np.ndarray
     unopened: np.ndarray | None = None
+    departure: np.ndarray | None = None
 
     @classmethod
     def none(
@@ -215,7 +216,7 @@ def objects_by_segmentation(
         doubtful = dots[first[:, 1], first[:, 0]] > 0
     statistic = sa.statistic(params.statistic)
     return Objects(
-        kept, statistic, sa.centroid_inside, sa.centroid, rejected, fg, doubtful, unopened
+        kept, statistic, sa.centroid_inside, sa.centroid, rejected, fg, doubtful, unopened, dev
     )
 
 

@@ -231,3 +231,40 @@ def test_a_lone_grey_dot_the_opening_erased_is_counted_but_not_offered() -> None
     assert abs(dot.centroid[0] - 420) < 2 and abs(dot.centroid[1] - 300) < 2
     assert (dot.klass, dot.estimated_count) == ("merged", 1)
     assert colony.klass == "authentic"
+
+
+def _agar_with_domes(discs: list[tuple[float, float, float]]) -> np.ndarray:
+    """A 600 px agar square (10 px/mm) with dome-shaded colonies ``(x, y, r)``: darkest at
+    their centres, fading to the agar at their edges (where they overlap, the deeper one shows),
+    sensor noise."""
+    yy, xx = np.mgrid[0:600, 0:600].astype(np.float32)
+    shade = np.zeros((600, 600), np.float32)
+    for x, y, r in discs:
+        d = np.hypot(xx - x, yy - y) / r
+        shade = np.maximum(shade, np.clip(1.0 - d * d, 0.0, 1.0) ** 0.25)
+    agar, colony = np.float32(AGAR_BGR), np.float32(COLONY_BGR)
+    img = agar + shade[..., None] * (colony - agar)
+    img += np.random.default_rng(0).normal(0.0, 2.0, img.shape)
+    return np.clip(img + 0.5, 0, 255).astype(np.uint8)
+
+
+def test_a_clump_without_waists_counts_its_colonies_cores(monkeypatch: pytest.MonkeyPatch) -> None:
+    # three domes of radius 20 px, their centres 28 px apart (0.7 of a diameter): the outline
+    # is no DES, yet its distance transform has a single peak; above a level of the departure
+    # the clump falls apart into three round cores (plate_cores)
+    singles = [(120, 150, 20), (120, 450, 20), (480, 450, 20)]
+    clump = [(380, 280, 20), (408, 280, 20), (394, 280 + 14 * math.sqrt(3), 20)]
+    img = _agar_with_domes(singles + clump)
+
+    def clump_class_and_count() -> tuple[str, int]:
+        (body,) = [c for c in _analyse(img) if c.centroid[0] > 300 and c.centroid[1] < 400]
+        return body.klass, body.estimated_count
+
+    assert clump_class_and_count() == ("merged", 3)
+    assert [c.estimated_count for c in _analyse(img) if c.klass == "authentic"] == [1, 1, 1]
+
+    def no_cores(bodies: plate_bodies.Bodies, *_: object) -> np.ndarray:
+        return np.zeros(len(bodies.index), np.intp)
+
+    monkeypatch.setattr("labauto.vision.plate.core_counts", no_cores)
+    assert clump_class_and_count() == ("merged", 1)

@@ -1,0 +1,107 @@
+"""Colonies in a clump, counted by their cores over several levels (plate analysis, step 5).
+
+The distance transform of step 5 (:func:`labauto.vision.plate_bodies.merged_counts`) counts
+the colonies of a merged body by the waists of its outline. Colonies that overlap by more than
+about half their width leave no waist: a compact clump of three or four reads as one or two
+(AGAR plate 518 is full of them). Each colony, though, is a dome: its departure from the agar
+is largest at its centre and falls towards its edge, so above some level of the departure the
+clump falls apart into one round core per colony. This is the multi-threshold idea of OpenCFU
+(Geissmann 2013), applied inside each merged body. Choices made here:
+
+* **The departure.** The square root of eq. 1's deviation (the colour distance from the agar's
+  local background), smoothed by a Gaussian of ``_SIGMA_RATIO`` (0.08) times the plate's
+  single-colony radius (at least half a pixel), so that a colony's own grain gives no cores.
+* **Levels.** ``_LEVELS`` (12) levels per body, at the 5th to the 95th percentile of its own
+  departure: a faint clump and a dark one are cut alike.
+* **A core** is a connected part of the body above a level that looks like a colony's centre:
+  at least ``_CORE_RADIUS_RATIO`` (0.35) times the plate's single-colony radius as a disc,
+  filling at least ``_CORE_FILL`` (0.85) of the ellipse inscribed in its bounding box, and no
+  more than 1 / ``_CORE_ASPECT`` (0.6) times as long as wide. Read from the components'
+  statistics, all bodies at once on the bodies' shared canvas (:class:`Bodies`), one pass per
+  level.
+* **The count** of a body is the most cores found at any one level; a merged body counts the
+  larger of that and its distance transform's count, so the cores never lower a count.
+  Bodies with printed characters across them are left out: a dot of print is a round core.
+
+Measured (``benchmarks/bench_real_plates.py``): see :mod:`labauto.vision.plate` step 5.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from labauto.vision.plate_bodies import Bodies
+
+_SIGMA_RATIO = 0.08  # smoothing of the departure, times the single-colony radius
+_LEVELS = 12  # levels per body, from its 5th to its 95th percentile
+_CORE_RADIUS_RATIO = 0.35  # a core is at least this times the single-colony radius, as a disc
+_CORE_FILL = 0.85  # ... fills this much of the ellipse inscribed in its bounding box ...
+_CORE_ASPECT = 0.6  # ... and is at least this wide for its length
+
+
+def core_counts(
+    bodies: Bodies, departure: np.ndarray, which: np.ndarray, single_r: float
+) -> np.ndarray:
+    """The most colony-like cores of each body over its levels (0 where ``which`` is false).
+
+    Parameters
+    ----------
+    bodies : Bodies
+        The bodies and their masks on the shared canvas.
+    departure : ndarray
+        HxW float32 over the ROI: eq. 1's deviation (summed squared colour difference).
+    which : ndarray of bool
+        The bodies to count.
+    single_r : float
+        The plate's single-colony radius (px): the median inscribed radius of its DES bodies.
+    """
+    counts = np.zeros(len(bodies.index), np.intp)
+    least_area = math.pi * (_CORE_RADIUS_RATIO * single_r) ** 2
+    which = which & (bodies.area >= 2 * least_area)  # room for two cores at least
+    if not which.any() or single_r <= 0:
+        return counts
+    # a smaller canvas of only these bodies' slots, as wide as the widest of them
+    slot = np.diff(np.append(bodies.row, len(bodies.row_body)))
+    rows = which[np.repeat(np.arange(len(slot)), slot)]
+    row_body = bodies.row_body[rows]
+    width = int(bodies.width[which].max())
+    inside = bodies.mask[rows, :width] > 0
+    canvas = np.zeros(inside.shape, np.float32)
+    starts = np.cumsum(slot[which]) - slot[which]
+    sigma = max(_SIGMA_RATIO * single_r, 0.5)
+    reach = math.ceil(4 * sigma) + 1  # beyond OpenCV's kernel: the same as over the whole ROI
+    height, width_roi = departure.shape
+    for b, r in zip(np.flatnonzero(which).tolist(), starts.tolist(), strict=True):
+        t, lft, h, w = bodies.top[b], bodies.left[b], bodies.height[b], bodies.width[b]
+        y0, x0 = max(t - reach, 0), max(lft - reach, 0)
+        y1, x1 = min(t + h + reach, height), min(lft + w + reach, width_roi)
+        distance = cv2.GaussianBlur(cv2.sqrt(departure[y0:y1, x0:x1]), (0, 0), sigma)
+        canvas[r : r + h, :w] = distance[t - y0 : t - y0 + h, lft - x0 : lft - x0 + w]
+    inside &= row_body[:, None] >= 0
+    ys, xs = np.nonzero(inside)
+    body = row_body[ys]  # non-decreasing: the canvas holds the bodies row after row
+    values = canvas[ys, xs]
+    # each body's values in order: one sort of a key that puts the bodies apart
+    order = np.argsort(body * (float(values.max(initial=0.0)) + 1.0) + values)
+    body, values = body[order], values[order]
+    first = np.searchsorted(body, np.arange(len(which)))
+    size = np.bincount(body, minlength=len(which))
+    has = size > 0
+    for q in np.linspace(0.05, 0.95, _LEVELS):
+        level = np.full(len(which), np.inf, np.float32)
+        level[has] = values[first[has] + np.floor(q * (size[has] - 1)).astype(np.intp)]
+        row_level = level[np.maximum(row_body, 0)]
+        above = (inside & (canvas > row_level[:, None])).view(np.uint8)
+        n, _, stats, _ = cv2.connectedComponentsWithStats(above, connectivity=8)
+        if n <= 1:
+            continue
+        top, w, h, area = (stats[1:, k] for k in (1, 2, 3, 4))
+        core = area >= least_area
+        core &= area >= _CORE_FILL * math.pi / 4 * w * h
+        core &= np.minimum(w, h) >= _CORE_ASPECT * np.maximum(w, h)
+        found = np.bincount(row_body[top[core]], minlength=len(which))
+        counts = np.maximum(counts, found)
+    return counts
