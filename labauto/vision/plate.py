@@ -111,6 +111,7 @@ Coordinates: pixels, origin at the centre of the top-left pixel, x right, y down
 
 from __future__ import annotations
 
+import math
 import time
 
 import cv2
@@ -276,7 +277,9 @@ def analyze_plate(image: np.ndarray, params: PlateParams | None = None) -> Plate
     counts = np.where(large, counts + spots, counts)
     if objects.departure is not None:  # a clump without waists: its colonies' cores
         clump = ~bodies.stroke & ~des & ~inked
-        counts = np.maximum(counts, core_counts(bodies, objects.departure, clump, single_r_in))
+        least_rise = 0.5 * math.sqrt(params.color_threshold)  # half eq. 1's t, as a distance
+        cores = core_counts(bodies, objects.departure, clump, single_r_in, least_rise)
+        counts = np.maximum(counts, cores)
     mix, spotted = np.where(des, mix, 0.0), spots > 0  # the mixed score is a DES's alone
 
     colonies: list[Colony] = []

@@ -19,6 +19,11 @@ clump falls apart into one round core per colony. This is the multi-threshold id
   more than 1 / ``_CORE_ASPECT`` (0.6) times as long as wide. Read from the components'
   statistics, all bodies at once on the bodies' shared canvas (:class:`Bodies`), one pass per
   level.
+* **A dome to cut.** A body whose smoothed departure rises by less than ``least_range``
+  from its 5th to its 95th percentile has no dome, only noise or texture, and is not cut:
+  :mod:`labauto.vision.plate` passes half of eq. 1's threshold as a colour distance
+  (``sqrt(color_threshold) / 2``, 12 grey levels by default). Large faint colonies read as
+  clumps of four otherwise (AGAR plate 11761 at 7 px/mm).
 * **The count** of a body is the most cores found at any one level; a merged body counts the
   larger of that and its distance transform's count, so the cores never lower a count.
   Bodies with printed characters across them are left out: a dot of print is a round core.
@@ -43,7 +48,7 @@ _CORE_ASPECT = 0.6  # ... and is at least this wide for its length
 
 
 def core_counts(
-    bodies: Bodies, departure: np.ndarray, which: np.ndarray, single_r: float
+    bodies: Bodies, departure: np.ndarray, which: np.ndarray, single_r: float, least_range: float
 ) -> np.ndarray:
     """The most colony-like cores of each body over its levels (0 where ``which`` is false).
 
@@ -57,6 +62,9 @@ def core_counts(
         The bodies to count.
     single_r : float
         The plate's single-colony radius (px): the median inscribed radius of its DES bodies.
+    least_range : float
+        Least rise of a body's smoothed departure from its 5th to its 95th percentile (colour
+        distance, grey levels) for it to be cut into cores at all.
     """
     counts = np.zeros(len(bodies.index), np.intp)
     least_area = math.pi * (_CORE_RADIUS_RATIO * single_r) ** 2
@@ -89,10 +97,15 @@ def core_counts(
     body, values = body[order], values[order]
     first = np.searchsorted(body, np.arange(len(which)))
     size = np.bincount(body, minlength=len(which))
+    quantiles = np.linspace(0.05, 0.95, _LEVELS)
+    levels = np.full((_LEVELS, len(which)), np.inf, np.float32)
     has = size > 0
-    for q in np.linspace(0.05, 0.95, _LEVELS):
-        level = np.full(len(which), np.inf, np.float32)
-        level[has] = values[first[has] + np.floor(q * (size[has] - 1)).astype(np.intp)]
+    at = first[has] + np.floor(quantiles[:, None] * (size[has] - 1)).astype(np.intp)
+    levels[:, has] = values[at]
+    rise = np.zeros(len(which), np.float32)
+    rise[has] = levels[-1, has] - levels[0, has]
+    levels[:, rise < least_range] = np.inf  # no dome to cut: noise and texture
+    for level in levels:
         row_level = level[np.maximum(row_body, 0)]
         above = (inside & (canvas > row_level[:, None])).view(np.uint8)
         n, _, stats, _ = cv2.connectedComponentsWithStats(above, connectivity=8)

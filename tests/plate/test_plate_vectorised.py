@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from labauto.vision import dish as dish_module
-from labauto.vision import plate_area, plate_bodies, plate_objects
+from labauto.vision import plate_area, plate_bodies, plate_cores, plate_objects
 from labauto.vision.plate import PlateParams, analyze_plate
 from labauto.vision.plate_background import deviation
 
@@ -203,6 +203,66 @@ def test_vectorised_mix_scores_and_merged_counts_equal_per_body(
             filled += bool(np.any(dt != ref["dt"]))
     assert (floored > 0) == (least_peak > 0)
     assert filled > 0
+
+
+def _reference_cores(departure: np.ndarray, ref: dict, single_r: float, least_range: float) -> int:
+    """The most round cores over the levels of one body, in its own crop (plate_cores)."""
+    mask, (x, y, _, _) = ref["mask"], ref["bbox"]
+    left, top = x - PAD, y - PAD
+    h, w = mask.shape
+    sigma = max(plate_cores._SIGMA_RATIO * single_r, 0.5)
+    distance = cv2.GaussianBlur(cv2.sqrt(departure), (0, 0), sigma)[top : top + h, left : left + w]
+    values = np.sort(distance[mask > 0])
+    picks = np.floor(np.linspace(0.05, 0.95, plate_cores._LEVELS) * (values.size - 1))
+    levels = values[picks.astype(np.intp)]
+    if levels[-1] - levels[0] < least_range:
+        return 0
+    least_area = math.pi * (plate_cores._CORE_RADIUS_RATIO * single_r) ** 2
+    best = 0
+    for level in levels:
+        above = ((distance > level) & (mask > 0)).astype(np.uint8)
+        stats = cv2.connectedComponentsWithStats(above, connectivity=8)[2]
+        cores = 0
+        for _, _, cw, ch, area in stats[1:]:
+            fills = area >= plate_cores._CORE_FILL * math.pi / 4 * cw * ch
+            squat = min(cw, ch) >= plate_cores._CORE_ASPECT * max(cw, ch)
+            cores += bool(area >= least_area and fills and squat)
+        best = max(best, cores)
+    return best
+
+
+def test_core_counts_on_the_canvas_equal_per_body(plates: list) -> None:
+    split = 0  # bodies with two or more cores: the counting must be exercised
+    for img, _ in plates[:3]:
+        _, copy, params, (x0, y0), usable, _ = plate_area.prepare_plate(
+            img, PlateParams(drop_at_border=True)
+        )
+        roi = copy.image[y0 : y0 + usable.shape[0], x0 : x0 + usable.shape[1]]
+        found = plate_objects.objects_by_segmentation(
+            roi, usable, params, plate_objects.agar_background(roi, usable, params)
+        )
+        des_shape = found.inside & (found.d_alpha < params.des_threshold_deg)
+        bodies = plate_bodies.measure_bodies(
+            found.contours, found.foreground, des_shape, params, found.rejected
+        )
+        assert found.departure is not None
+        single_r = float(np.median(bodies.r_in[des_shape[bodies.index] & ~bodies.stroke]))
+        everyone = ~bodies.stroke
+        for least_range in (0.0, 12.0):
+            counts = plate_cores.core_counts(
+                bodies, found.departure, everyone, single_r, least_range
+            )
+            for b, k in enumerate(bodies.index):
+                ref = _reference_body(found.contours[k], found.foreground, params)
+                big = ref is not None and ref["area"] >= 2 * math.pi * (0.35 * single_r) ** 2
+                expected = (
+                    _reference_cores(found.departure, ref, single_r, least_range)
+                    if everyone[b] and big
+                    else 0
+                )
+                assert counts[b] == expected
+                split += expected >= 2
+    assert split > 0
 
 
 def test_unit_weight_deviation_equals_the_weighted_formula(plates: list) -> None:
