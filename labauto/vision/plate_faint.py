@@ -128,6 +128,7 @@ _LEAST_EDGE = 0.15  # ... but never less than this
 _GREY = np.full((3, 3), 1 / 3, np.float32)  # cv2.transform: each channel to the mean of the three
 _RING = np.ones((5, 5), np.uint8)  # the band round a body's outline where its edge is read
 _MIN_SPREAD = 0.5  # least median unsmoothed departure of a body, relative to its contrast
+_SMALL_CONTRAST = 1.25  # a body under the grey search's least size departs this much more
 
 
 def faint_bodies(
@@ -202,7 +203,8 @@ def faint_bodies(
     depth = cv2.distanceTransform(agar, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     inner = cv2.compare(depth, margin_mm * ppm, cv2.CMP_GT)
     disc = math.pi / 4 * ppm**2  # work pixels in a disc 1 mm across
-    limits = (factor, disc * min_diameter_mm**2, disc * max_diameter_mm**2, max_overlap)
+    least = disc * min_diameter_mm**2
+    limits = (factor, least, disc * max_diameter_mm**2, max_overlap, least)
     kept = _bodies_departing((diff, raw), inner, fine, limits)
     if chroma:  # the departure across the grey axis: a hue, whatever the brightness does
         hue = tuple(cv2.subtract(d, cv2.transform(d, _GREY)) for d in (diff, raw))
@@ -222,17 +224,18 @@ def _bodies_departing(
     departure: tuple[np.ndarray, np.ndarray],
     inner: np.ndarray,
     fine: np.ndarray,
-    limits: tuple[float, float, float, float],
+    limits: tuple[float, float, float, float, float],
 ) -> list[np.ndarray]:
     """Outlines of the colony-like bodies where the norm of ``diff`` departs from the agar's.
 
     ``departure`` is ``(diff, raw)``: the signed difference from the coarse background (work
     pixels, 3 channels), smoothed and as it is. ``inner`` is the agar whose norm sets the
     threshold, ``fine`` eq. 1's foreground, ``limits`` the factor, the least and largest area
-    (work pixels) and the largest overlap with ``fine``.
+    (work pixels), the largest overlap with ``fine`` and the area under which a body is small
+    (its contrast must reach ``_SMALL_CONTRAST`` times the threshold).
     """
     diff, raw = departure
-    factor, min_area, max_area, max_overlap = limits
+    factor, min_area, max_area, max_overlap, small_area = limits
     norm = cv2.sqrt(cv2.transform(cv2.multiply(diff, diff), np.ones((1, 3), np.float32)))
     samples = norm[inner > 0]
     if samples.size == 0:
@@ -259,6 +262,8 @@ def _bodies_departing(
             continue
         ring = cv2.subtract(cv2.dilate(body, _RING), cv2.erode(body, _RING))
         contrast = median(norm[y : y + bh, x : x + bw][body > 0])
+        if area < small_area and contrast < _SMALL_CONTRAST * t:
+            continue  # small: a blotch of the agar's texture or of a JPEG's colour blocks
         sharpness = float(np.percentile(_edge_in(diff, (x, y, bw, bh))[ring > 0], 75))
         # the edge is at most a millimetre wide, or (a large colony) 1 / _EDGE_RADII of its
         # radius, with a floor

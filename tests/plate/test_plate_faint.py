@@ -91,15 +91,15 @@ def test_a_colony_departing_in_hue_only_is_found_through_the_agars_texture() -> 
     assert not found(_textured_agar_with_hued_disc((0.0, 0.0, 0.0)), chroma=True).any()
 
 
-def _agar_with_small_hued_disc(diameter_mm: float) -> np.ndarray:
+def _agar_with_small_hued_disc(diameter_mm: float, depth: float = 1.0) -> np.ndarray:
     """600 px of flat agar (10 px/mm, sensor noise) with a disc of ``diameter_mm`` that is
-    yellower (12 levels less blue, 4 more red), as the small faint colonies of AGAR plates
-    11761, 11924 and 12033."""
+    yellower (``depth`` times 12 levels less blue, 4 more red), as the small faint colonies of
+    AGAR plates 11761, 11924 and 12033."""
     disc = np.zeros((600, 600), np.float32)
     cv2.circle(disc, (300, 300), round(diameter_mm * PX_PER_MM / 2), 1.0, -1, cv2.LINE_AA)
     img = np.empty((600, 600, 3), np.float32)
     img[:] = AGAR_BGR
-    img += disc[..., None] * np.float32([-12.0, 0.0, 4.0])
+    img += disc[..., None] * np.float32([-12.0, 0.0, 4.0]) * depth
     img += np.random.default_rng(2).normal(0.0, 2.0, img.shape)
     return np.clip(img + 0.5, 0, 255).astype(np.uint8)
 
@@ -116,6 +116,26 @@ def test_a_small_colony_departing_in_hue_is_found_below_the_grey_searchs_size() 
 
     assert found()  # the hue search keeps bodies from 1 mm on
     assert not found(min_hue_diameter_mm=2.0)  # the grey search's least size would miss it
+
+
+def test_a_small_hued_body_must_depart_more_than_a_large_one(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # a third as yellow: over the threshold, but not by the quarter more that a body under the
+    # grey search's 2 mm must show (a blotch of texture or of a JPEG's colour blocks is as
+    # small); 3 mm across, the same departure is a colony
+    usable = np.zeros((600, 600), np.uint8)
+    cv2.circle(usable, (300, 300), 290, 255, -1)
+    none = np.zeros_like(usable)
+
+    def found(diameter_mm: float) -> bool:
+        img = _agar_with_small_hued_disc(diameter_mm, depth=0.32)
+        return bool(faint_bodies(img, usable, none, PX_PER_MM, margin_mm=1.0)[300, 300])
+
+    assert found(3.0)
+    assert not found(1.8)
+    monkeypatch.setattr(plate_faint, "_SMALL_CONTRAST", 1.0)
+    assert found(1.8)
 
 
 def test_a_dark_speck_smeared_by_the_smoothing_is_no_faint_body(
