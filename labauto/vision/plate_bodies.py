@@ -81,6 +81,16 @@ class Bodies:
     concavity: np.ndarray
     elongation: np.ndarray
 
+    def slots_of(self, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A smaller canvas of only the bodies where ``which`` is true (the layout's rules
+        still hold): which canvas rows it keeps, and each body's first row on it (0 for the
+        others)."""
+        slot = np.diff(np.append(self.row, len(self.row_body)))
+        rows = which[np.repeat(np.arange(len(slot)), slot)]
+        first_row = np.zeros(len(slot), np.intp)
+        first_row[which] = np.cumsum(slot[which]) - slot[which]
+        return rows, first_row
+
 
 def moment_test(contour: np.ndarray, params: PlateParams) -> tuple[str | None, float]:
     """Artefact tests of step 3 that need only the contour: the reject reason (or None) and
@@ -344,19 +354,15 @@ def merged_counts(
     if not which.any():
         return counts
     counts[which] = MIN_MERGED_COUNT
-    # a smaller canvas of only these bodies' slots (the layout's rules still hold)
-    slot = np.diff(np.append(bodies.row, len(bodies.row_body)))
-    rows = which[np.repeat(np.arange(len(slot)), slot)]
+    rows, first_row = bodies.slots_of(which)
     dt, row_body = bodies.dt[rows], bodies.row_body[rows]
-    first_row = np.zeros(len(slot), np.intp)
-    first_row[which] = np.cumsum(slot[which]) - slot[which]
     r_in = bodies.r_in
     if count_mask is not None or (round_outline is not None and (round_outline & which).any()):
         solid = (bodies.mask if count_mask is None else count_mask)[rows]
         if round_outline is not None:
             solid = holes_filled(solid, row_body, round_outline)
         dt = cv2.distanceTransform(solid, cv2.DIST_L2, 3)
-        r_in = np.zeros(len(slot))
+        r_in = np.zeros(len(which))
         r_in[which] = np.maximum.reduceat(dt.max(axis=1), first_row[which])
     floor = np.maximum(max(2.0, least_peak), 0.3 * r_in)
     floor_of_row = np.where(row_body >= 0, floor[np.maximum(row_body, 0)], np.inf)

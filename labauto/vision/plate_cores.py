@@ -67,22 +67,23 @@ def core_counts(
         distance, grey levels) for it to be cut into cores at all.
     """
     counts = np.zeros(len(bodies.index), np.intp)
+    if single_r <= 0:
+        return counts
     least_area = math.pi * (_CORE_RADIUS_RATIO * single_r) ** 2
     which = which & (bodies.area >= 2 * least_area)  # room for two cores at least
-    if not which.any() or single_r <= 0:
+    if not which.any():
         return counts
     # a smaller canvas of only these bodies' slots, as wide as the widest of them
-    slot = np.diff(np.append(bodies.row, len(bodies.row_body)))
-    rows = which[np.repeat(np.arange(len(slot)), slot)]
+    rows, first_row = bodies.slots_of(which)
     row_body = bodies.row_body[rows]
     width = int(bodies.width[which].max())
     inside = bodies.mask[rows, :width] > 0
     canvas = np.zeros(inside.shape, np.float32)
-    starts = np.cumsum(slot[which]) - slot[which]
     sigma = max(_SIGMA_RATIO * single_r, 0.5)
     reach = math.ceil(4 * sigma) + 1  # beyond OpenCV's kernel: the same as over the whole ROI
     height, width_roi = departure.shape
-    for b, r in zip(np.flatnonzero(which).tolist(), starts.tolist(), strict=True):
+    for b in np.flatnonzero(which).tolist():
+        r = first_row[b]
         t, lft, h, w = bodies.top[b], bodies.left[b], bodies.height[b], bodies.width[b]
         y0, x0 = max(t - reach, 0), max(lft - reach, 0)
         y1, x1 = min(t + h + reach, height), min(lft + w + reach, width_roi)
