@@ -136,3 +136,29 @@ def test_a_dish_cut_by_the_frame_is_named_or_analysed_whole_when_configured() ->
     # a dish that only touches the frame (real photos do) is fine
     edge = np.ascontiguousarray(img[:, 100:])
     assert len(analyze_plate(edge).colonies) >= 25
+
+
+@pytest.mark.parametrize("factor", [1.0, 3.5])
+def test_a_plate_moved_by_whole_pixels_reads_the_same_when_its_dish_moves_with_it(
+    factor: float,
+) -> None:
+    # nothing in the analysis depends on where the dish lies in the frame: moved by whole
+    # pixels with its dish, the plate gives the same colonies, moved. (With the dish found
+    # instead, a pixel's move can change the dish by a fraction of a pixel and with it the
+    # working copy: that is all of the counts' spread in ``bench_real_plates.py --shifts``.)
+    img, _ = generate_plate(5, agar="amber")
+    if factor != 1.0:
+        img = cv2.resize(img, None, fx=factor, fy=factor, interpolation=cv2.INTER_CUBIC)
+    dish = analyze_plate(img).dish
+    (cx, cy), r = dish.center, dish.radius
+    first = analyze_plate(img, PlateParams(region=(cx, cy, r)))
+    assert len(first.colonies) >= 25
+    for shift in (1, 3):
+        moved = analyze_plate(img[shift:, shift:], PlateParams(region=(cx - shift, cy - shift, r)))
+        assert [c.klass for c in moved.colonies] == [c.klass for c in first.colonies]
+        assert [c.estimated_count for c in moved.colonies] == [
+            c.estimated_count for c in first.colonies
+        ]
+        for a, b in zip(first.colonies, moved.colonies, strict=True):
+            assert np.allclose(np.add(b.centroid, shift), a.centroid, atol=1e-6)
+            assert np.allclose(b.contour + shift, a.contour, atol=1e-6)
