@@ -98,6 +98,12 @@ then join their neighbours. Touching faint colonies split by a watershed of the 
 transform gave 0.892 with none more matched: the parts of 11924's chains are ragged
 (solidity 0.25-0.7). An opening of 1-3 work pixels before the tests gave 0.887-0.894. A
 second pass at 12 px/mm for colonies of 0.4-2 mm gave 0.893-0.896, about half its finds false.
+Searching the rim's band as well (AGAR F1 0.910 as it stands; large faint colonies within
+4 mm of the dish's edge are missed: 11924, 12031, 12033, 510), out to 0.5 or 1 mm from the
+usable area's border, with eq. 1's background there (the rim's radial profile) in place of the
+cell median: reported 1687 -> 1700 / 1697, matched 1626 -> 1631 / 1630 (F1 0.910 either way,
+recall 2-4 mm inside the edge 0.75 -> 0.80), phone-counts 1.9 -> 2.1 %; the band's lines and
+reflections gave false colonies on sparse plates (11890 +2, 11955 +1, 11773 +1).
 
 A learned pass, tried and not kept (AGAR F1 0.895 as it stands): a small U-Net (16-64
 channels, 4 levels) on the work copy's signed difference from the coarse background, trained

@@ -67,6 +67,13 @@ matched the same; phone-counts unchanged.
 
 Limit: a dark grey or blue colony (some chromogenic media) that is small or stroke-shaped
 reads as ink; ``PlateParams.reject_ink`` turns the test off for such plates.
+
+Limit: a dot-matrix character whose dots the faint pass joins into one filled body (an "0" or a
+"D" on the dark plates 13895, 13938 and 14618: 4 of the 18 AGAR bodies that hold no boxed
+colony) is darkened evenly, 8-14 %, with too few pixels 25 % darker to read as dots, so it is
+neither dotted nor a stroke. Counting the dots by a black top-hat (discs of 0.6 and 1 mm,
+levels of 0.75-1.5 times the body's mean darkening): at no setting did all four hold two or
+more dots (13938's held 1 or 2, 14618's smaller one 1 or 3, 13895's 2-31). Not kept.
 """
 
 from __future__ import annotations
