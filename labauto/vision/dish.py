@@ -97,10 +97,11 @@ def find_dish(image: np.ndarray, radius_range: tuple[float, float] = (0.30, 0.50
     support then trade places); the circle of least median residual over triplets of rays a
     third of a turn apart (19-20); the median of 9 refinements started 0.5 px apart (13, at 9
     times the cost, but the counts moved as much: over 4 shifts AGAR 91 -> 93 colonies summed,
-    median count error 7.3 -> 9.0 %). The counts' spread over such moves is not the dish's
-    error alone: with the radius held and only the centre found, they moved nearly as much
-    (phone and AGAR photos over 3 shifts: 155 colonies summed against 170); what moves them is
-    where the working copy's pixel grid and the usable area fall, by a fraction of a pixel.
+    median count error 7.3 -> 9.0 %). A steadier dish alone would not steady the counts: a
+    fraction of a pixel in the centre moves them, through where the working copy's pixel grid
+    and the usable area fall (phone and AGAR photos over 3 shifts: 170 colonies summed with the
+    dish found, 155 with its radius held and only the centre found, none with the whole dish
+    moved with the photo).
 
     Parameters
     ----------
