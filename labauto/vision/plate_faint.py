@@ -123,6 +123,7 @@ false colonies; and 50 ms more per plate on this machine's 2 cores.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -217,11 +218,11 @@ def faint_bodies(
     inner = cv2.compare(depth, margin_mm * ppm, cv2.CMP_GT)
     disc = math.pi / 4 * ppm**2  # work pixels in a disc 1 mm across
     least = disc * min_diameter_mm**2
-    limits = (factor, least, disc * max_diameter_mm**2, max_overlap, least)
+    limits = _Limits(factor, least, disc * max_diameter_mm**2, max_overlap, small_area=least)
     kept = _bodies_departing((diff, raw), inner, fine, limits)
     if chroma:  # the departure across the grey axis: a hue, whatever the brightness does
         hue = tuple(cv2.subtract(d, cv2.transform(d, _GREY)) for d in (diff, raw))
-        limits = (factor, disc * min_hue_diameter_mm**2, *limits[2:])
+        limits = limits._replace(min_area=disc * min_hue_diameter_mm**2)
         kept += _bodies_departing(hue, inner, fine, limits)
     if not kept:
         return empty
@@ -233,19 +234,27 @@ def faint_bodies(
     return empty
 
 
+class _Limits(NamedTuple):
+    """What a faint body must meet (areas in work pixels)."""
+
+    factor: float  # the threshold over the agar's median norm
+    min_area: float  # least and largest area
+    max_area: float
+    max_overlap: float  # largest share overlapping eq. 1's foreground
+    small_area: float  # under this a body must reach _SMALL_CONTRAST times the threshold
+
+
 def _bodies_departing(
     departure: tuple[np.ndarray, np.ndarray],
     inner: np.ndarray,
     fine: np.ndarray,
-    limits: tuple[float, float, float, float, float],
+    limits: _Limits,
 ) -> list[np.ndarray]:
     """Outlines of the colony-like bodies where the norm of ``diff`` departs from the agar's.
 
     ``departure`` is ``(diff, raw)``: the signed difference from the coarse background (work
     pixels, 3 channels), smoothed and as it is. ``inner`` is the agar whose norm sets the
-    threshold, ``fine`` eq. 1's foreground, ``limits`` the factor, the least and largest area
-    (work pixels), the largest overlap with ``fine`` and the area under which a body is small
-    (its contrast must reach ``_SMALL_CONTRAST`` times the threshold).
+    threshold, ``fine`` eq. 1's foreground.
     """
     diff, raw = departure
     factor, min_area, max_area, max_overlap, small_area = limits
@@ -266,27 +275,26 @@ def _bodies_departing(
         area = cv2.countNonZero(body)
         if not min_area <= area <= max_area:
             continue
-        overlap = cv2.countNonZero(cv2.bitwise_and(body, fine[y : y + bh, x : x + bw]))
+        window = (slice(y, y + bh), slice(x, x + bw))
+        overlap = cv2.countNonZero(cv2.bitwise_and(body, fine[window]))
         if overlap > max_overlap * area:
             continue
         solidity = area / max(cv2.contourArea(cv2.convexHull(outline)), 1.0)
         _, radius = cv2.minEnclosingCircle(outline)
         if solidity < _MIN_SOLIDITY or area / (math.pi * radius * radius) < _MIN_ROUNDNESS:
             continue
-        ring = cv2.subtract(cv2.dilate(body, _RING), cv2.erode(body, _RING))
-        contrast = median(norm[y : y + bh, x : x + bw][body > 0])
+        inside = body > 0
+        contrast = median(norm[window][inside])
         if area < small_area and contrast < _SMALL_CONTRAST * t:
             continue  # small: a blotch of the agar's texture or of a JPEG's colour blocks
+        ring = cv2.subtract(cv2.dilate(body, _RING), cv2.erode(body, _RING))
         sharpness = float(np.percentile(_edge_in(diff, (x, y, bw, bh))[ring > 0], 75))
         # the edge is at most a millimetre wide, or (a large colony) 1 / _EDGE_RADII of its
         # radius, with a floor
         least = max(min(_MIN_EDGE, _EDGE_RADII / math.sqrt(area / math.pi)), _LEAST_EDGE)
         if sharpness < least * contrast:
             continue  # no edge: a drift of the agar's colour, not a colony
-        inside = body > 0
-        if _spread(diff[y : y + bh, x : x + bw][inside], raw[y : y + bh, x : x + bw][inside]) < (
-            _MIN_SPREAD * contrast
-        ):
+        if _spread(diff[window][inside], raw[window][inside]) < _MIN_SPREAD * contrast:
             continue  # a speck smeared by the smoothing, not a body departing as a whole
         kept.append(outline)
     return kept

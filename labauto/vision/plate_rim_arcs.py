@@ -73,19 +73,23 @@ LINE_SHARE = 0.6
 class RimPolar:
     """The bodies' outline points in the dish's polar coordinates, body after body.
 
-    ``rho`` is each point's distance from the usable circle's centre ``(cx, cy)``, ``turn``
-    its angle from its body's mean direction (radians, in -pi..pi: no wrap at +-pi for a
-    body), ``mean`` that direction per body; ``starts`` and ``lengths`` give each body's run of
-    points. Both rim tests read it: :func:`rim_arcs` and :func:`on_ring_lines`.
+    ``rho`` is each point's distance from the usable circle's centre ``(cx, cy)``; per body,
+    ``inmost`` and ``outmost`` are its least and largest ``rho``, ``mean`` its mean direction
+    and ``first`` and ``last`` its points' least and largest angle from that direction
+    (radians, in -pi..pi: no wrap at +-pi for a body); ``starts`` and ``lengths`` give each
+    body's run of points. Both rim tests read it: :func:`rim_arcs` and :func:`on_ring_lines`.
     """
 
     points: np.ndarray
     rho: np.ndarray
-    turn: np.ndarray
-    mean: np.ndarray
     starts: np.ndarray
     lengths: np.ndarray
     rim: tuple[float, float, float]
+    inmost: np.ndarray
+    outmost: np.ndarray
+    mean: np.ndarray
+    first: np.ndarray
+    last: np.ndarray
 
     @classmethod
     def of(cls, contours: list[np.ndarray], index: np.ndarray, rim: Circle) -> RimPolar:
@@ -99,22 +103,34 @@ class RimPolar:
             np.concatenate(kept).reshape(-1, 2).astype(np.float64) if kept else np.zeros((0, 2))
         )
         dx, dy = points[:, 0] - cx, points[:, 1] - cy
+        rho = np.hypot(dx, dy)
+        if not kept:
+            none = np.zeros(0)
+            return cls(points, rho, starts, lengths, (cx, cy, r), none, none, none, none, none)
         phi = np.arctan2(dy, dx)
-        mean = np.zeros(0)
-        if kept:
-            mean = np.arctan2(
-                np.add.reduceat(np.sin(phi), starts), np.add.reduceat(np.cos(phi), starts)
-            )
+        mean = np.arctan2(
+            np.add.reduceat(np.sin(phi), starts), np.add.reduceat(np.cos(phi), starts)
+        )
         turn = np.angle(np.exp(1j * (phi - np.repeat(mean, lengths))))
-        return cls(points, np.hypot(dx, dy), turn, mean, starts, lengths, (cx, cy, r))
+        return cls(
+            points,
+            rho,
+            starts,
+            lengths,
+            (cx, cy, r),
+            inmost=np.minimum.reduceat(rho, starts),
+            outmost=np.maximum.reduceat(rho, starts),
+            mean=mean,
+            first=np.minimum.reduceat(turn, starts),
+            last=np.maximum.reduceat(turn, starts),
+        )
 
     def __len__(self) -> int:
         return len(self.lengths)
 
     def near(self, px_per_mm: float) -> np.ndarray:
         """Per body: it lies wholly within ``BAND_MM`` of the rim."""
-        inmost = np.minimum.reduceat(self.rho, self.starts)
-        return inmost >= self.rim[2] - BAND_MM * px_per_mm
+        return self.inmost >= self.rim[2] - BAND_MM * px_per_mm
 
 
 def rim_arcs(polar: RimPolar, area: np.ndarray, px_per_mm: float) -> np.ndarray:
@@ -138,9 +154,8 @@ def rim_arcs(polar: RimPolar, area: np.ndarray, px_per_mm: float) -> np.ndarray:
         return np.zeros(0, bool)
     rho, starts, lengths = polar.rho, polar.starts, polar.lengths
     near = polar.near(px_per_mm)
-    radial = np.maximum.reduceat(rho, starts) - np.minimum.reduceat(rho, starts)
-    span = np.maximum.reduceat(polar.turn, starts) - np.minimum.reduceat(polar.turn, starts)
-    along = span * np.add.reduceat(rho, starts) / lengths  # length along the rim, px
+    radial = polar.outmost - polar.inmost
+    along = (polar.last - polar.first) * np.add.reduceat(rho, starts) / lengths  # along the rim, px
     # perimeter of each closed outline: every point to the next, the last to the first
     points = polar.points
     following = np.arange(len(points)) + 1
@@ -185,16 +200,15 @@ def on_ring_lines(
     cx, cy, _ = polar.rim
     h, w = unopened.shape
     # every radius each tested body spans (whole pixels), body after body
-    inner = np.floor(np.minimum.reduceat(polar.rho, polar.starts)[tested])
-    outer = np.ceil(np.maximum.reduceat(polar.rho, polar.starts)[tested])
+    inner, outer = np.floor(polar.inmost[tested]), np.ceil(polar.outmost[tested])
     spans = (outer - inner).astype(np.intp) + 1
     first = np.cumsum(spans) - spans
     body = np.repeat(np.arange(tested.size), spans)
     radii = (inner[body] + np.arange(spans.sum()) - first[body])[:, None]
     beyond = np.arange(1.0, max(LINE_BEYOND_MM * px_per_mm, 2.0) + 1.0)  # px along the arc
     covered = []
-    for reduce, side in ((np.maximum, 1.0), (np.minimum, -1.0)):
-        end = polar.mean[tested] + reduce.reduceat(polar.turn, polar.starts)[tested]
+    for turn, side in ((polar.last, 1.0), (polar.first, -1.0)):
+        end = polar.mean[tested] + turn[tested]
         angle = end[body][:, None] + side * beyond / np.maximum(radii, 1.0)
         x = np.clip(np.rint(cx + radii * np.cos(angle)).astype(np.intp), 0, w - 1)
         y = np.clip(np.rint(cy + radii * np.sin(angle)).astype(np.intp), 0, h - 1)
