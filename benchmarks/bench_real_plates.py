@@ -472,10 +472,13 @@ def main() -> int:
 
 def print_spread(runs: dict[str, list[dict[str, Any]]]) -> None:
     """Mean, least and largest of each set's totals over the shifted runs."""
-    keys = {name: (name, 1.0, 3) for name in ("precision", "recall")}
-    keys["f1"] = ("F1", 1.0, 3)
-    keys["median_count_error"] = ("median count error %", 100.0, 1)
-    keys["over_15"] = ("plates over 15 %", 1.0, 1)
+    keys = {  # summary key: label, scale, digits
+        "precision": ("precision", 1.0, 3),
+        "recall": ("recall", 1.0, 3),
+        "f1": ("F1", 1.0, 3),
+        "median_count_error": ("median count error %", 100.0, 1),
+        "over_15": ("plates over 15 %", 1.0, 1),
+    }
     print(f"over {len(next(iter(runs.values())))} shifts (mean, least - largest):")
     for name, summaries in runs.items():
         parts = []
