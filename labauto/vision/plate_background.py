@@ -20,6 +20,30 @@ know in advance. Choices made here:
   mean of chi-square distributed values). Faint colonies are taken with hysteresis: a body of
   pixels above ``low_ratio * t`` is kept when it holds at least one pixel above ``t``; its
   outline then sits where it departs from the agar, not at the threshold's contour.
+
+**The exposure.** ``t`` is in grey levels, so the camera's exposure moves it against the
+colonies: the AGAR photographs exposed at 0.6 times (``bench_real_plates.py --perturb
+gain:0.6``) give F1 0.860 and a median count error of 13.6 % (0.910 and 5.7 % as taken). A
+camera known to be darker or brighter than those photos is served by ``color_threshold``
+scaled by the square of the exposure: 216 at 0.6 times gives F1 0.903 (10.0 %), 1014 at 1.3
+times 0.910 (9.5 %; 0.891 and 8.8 % at 600). The exposure cannot be read from one photo
+without confusing it with the agar's colour, and ``t`` stays fixed. Measured and not kept
+(2026-12-07, seventh session; AGAR F1 / median count error, phone-counts median / plates over
+15 %; 0.910 / 5.7 %, 1.9 % / 4 as it stands):
+
+* ``t`` times the square of the agar's brightness (the mean of eq. 1's background over the
+  usable area) over 160, the pale AGAR plates' (Weber's law): 0.878 / 8.3 %, 6.5 % / 11; at
+  0.6 times 0.856. The mean grey within 0.8 of the dish's radius is 129-207 on the 4000-px
+  AGAR photos and 48-86 on the 2048-px ones and the phone photos, whose white colonies stand
+  far above it: their ``t`` fell to about a fifth, and they were over-counted.
+* ``t`` times the square of the photo's white point (the 99.9th percentile of the brightest
+  channel over the dish's bounding box, every fourth pixel) over 215: 0.908 / 5.7 %, 3.3 % / 4;
+  at 0.6 times 0.880 / 12.1 %, at 1.3 times (the factor allowed up to 2) 0.907 / 5.7 %. The
+  phone photos' white points (145-201 over the whole photo, against 183-255 on the AGAR
+  photos) are their dark scenes, not a short exposure.
+* The agar's noise as the yardstick (``noise_factor``; the median of ``dev`` over the agar,
+  2-35 levels squared over the plates of both sets): ``t`` is 17-300 times that median, so no
+  one factor fits.
 """
 
 from __future__ import annotations

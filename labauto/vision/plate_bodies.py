@@ -345,7 +345,11 @@ def merged_counts(
     reflection across it (AGAR plates 14130 and 14627 had such colonies counted 4-6). A chain of
     colonies closed round a patch of agar has no round outline, and keeps its hole. Measured on
     the AGAR photographs: reported 1575 -> 1565, matched 1485 either way (F1 0.858 -> 0.861);
-    filling the holes of every body also took 5 matched colonies of such chains.
+    filling the holes of every body also took 5 matched colonies of such chains. An open ring
+    (a C: phone photo IMG_2525's ring about 1.7 mm across counted 3) is no DES either. Counting 1 every
+    body of two or more that surrounds its centroid (the centroid outside it, its outline in
+    18 or 22 of 24 directions from it) cost 9 or 2 matched AGAR colonies (median count error
+    5.7 -> 7.3 %): such chains curl round agar as well. Not kept.
 
     ``count_mask`` (a canvas as ``bodies.mask``) replaces the bodies' masks for counting: the
     masks without the printed ink across them (:func:`labauto.vision.plate_ink.without_ink`).
@@ -442,6 +446,10 @@ def pair_counts(
     small or round irregular colony is neither.
     Measured on the AGAR photographs: of the one-peak merged bodies, 36 of the 52 that hold two
     or more boxed colonies and 13 of the 255 that hold one or none pass both.
+    Tried and not kept: the axis ratio of the body opened by a disc of 0.5, 0.8 or 1.0 times
+    its inscribed radius, so that pieces of the wall's lines stuck to a colony at the rim do
+    not make it long (phone photo IMG_2528: one colony counted 2, 14 for 12): AGAR F1 0.911,
+    0.909, 0.906 (0.910 without), median count error 5.7 -> 8.6 % at all three.
     """
     if pair_elongation <= 0 or authentic.sum() < MIN_SINGLES:
         return counts

@@ -104,6 +104,14 @@ usable area's border, with eq. 1's background there (the rim's radial profile) i
 cell median: reported 1687 -> 1700 / 1697, matched 1626 -> 1631 / 1630 (F1 0.910 either way,
 recall 2-4 mm inside the edge 0.75 -> 0.80), phone-counts 1.9 -> 2.1 %; the band's lines and
 reflections gave false colonies on sparse plates (11890 +2, 11955 +1, 11773 +1).
+Large faint colonies that overlap eq. 1's foreground by more than ``max_overlap`` (11773,
+11884, 14130, 12033, 11955: 0.22-0.37 of their area) hold it in their cores (0.10-0.54 of
+the pixels at least half their depth inside), not along their edge as a ring colony would: a
+body whose overlap lies along its edge (at most 0.1 of its core, 0.5 of it all) allowed,
+reported +1, matched +0. Eq. 1's pixels there are specks the opening removes later; the
+overlap counted against eq. 1's foreground opened by 0.75 mm: reported 1687 -> 1701,
+matched 1626 -> 1631 (F1 0.909), median count error 5.7 -> 8.3 % (2026-12-07, seventh
+session).
 
 A learned pass, tried and not kept (AGAR F1 0.895 as it stands): a small U-Net (16-64
 channels, 4 levels) on the work copy's signed difference from the coarse background, trained
