@@ -346,10 +346,10 @@ def merged_counts(
     colonies closed round a patch of agar has no round outline, and keeps its hole. Measured on
     the AGAR photographs: reported 1575 -> 1565, matched 1485 either way (F1 0.858 -> 0.861);
     filling the holes of every body also took 5 matched colonies of such chains. An open ring
-    (a C: phone photo IMG_2525's ring about 1.7 mm across counted 3) is no DES either. Counting 1 every
-    body of two or more that surrounds its centroid (the centroid outside it, its outline in
-    18 or 22 of 24 directions from it) cost 9 or 2 matched AGAR colonies (median count error
-    5.7 -> 7.3 %): such chains curl round agar as well. Not kept.
+    (a C: phone photo IMG_2525's ring about 1.7 mm across counted 3) is no DES either.
+    Counting 1 every body of two or more that surrounds its centroid (the centroid outside
+    it, its outline in 18 or 22 of 24 directions from it) cost 9 or 2 matched AGAR colonies
+    (median count error 5.7 -> 7.3 %): such chains curl round agar as well. Not kept.
 
     ``count_mask`` (a canvas as ``bodies.mask``) replaces the bodies' masks for counting: the
     masks without the printed ink across them (:func:`labauto.vision.plate_ink.without_ink`).
