@@ -111,8 +111,9 @@ body whose overlap lies along its edge (at most 0.1 of its core, 0.5 of it all) 
 reported +1, matched +0. Eq. 1's pixels there are specks the opening removes later; the
 overlap counted against eq. 1's foreground opened by 0.75 mm: reported 1687 -> 1701,
 matched 1626 -> 1631 (F1 0.909), median count error 5.7 -> 8.3 % (2026-12-07, seventh
-session). Of the 118 boxed colonies of 4 mm and over in no reported body (that session), 38
-lie below the threshold of both searches, 27 in the rim's band, about 30 in components too
+session). Of the 118 boxes of 4 mm and over whose centre lies in no reported body (some
+still matched, by a body's centroid in the box; that session), 38 lie below the threshold of
+both searches, 27 in the rim's band, about 30 in components too
 large or not round (touching faint colonies, texture) and 10 in ones overlapping eq. 1's
 foreground. Such components cut again above 1.25, 1.5 and 2 (or 1.5, 2 and 3) times the
 threshold, each piece tested as above: +1 matched, +2 reported. A second search smoothed by
