@@ -31,7 +31,15 @@ clump falls apart into one round core per colony. This is the multi-threshold id
 Measured (``benchmarks/bench_real_plates.py``): see :mod:`labauto.vision.plate` step 5. Each
 constant moved alone (``_CORE_FILL`` 0.8 or 0.9, ``_CORE_RADIUS_RATIO`` 0.3 or 0.45,
 ``_LEVELS`` 20, ``_SIGMA_RATIO`` 0.15) moves AGAR matched by -6 to +2 of 1626 (F1 0.908-0.911)
-and phone-counts' median by -0.1 to +0.6 points: within a pixel's jitter.
+and phone-counts' median by -0.1 to +0.6 points: within a pixel's jitter. Also measured and not
+kept (2026-12-07, seventh session): counting the most cores none of which holds another over
+all levels (a part counts 1 when it is a core, or what the parts above it count, whichever is
+more), so that colonies whose domes part at different levels all count. AGAR: the same count
+on every plate (518's clumps of small colonies part into one long core per two colonies that
+overlap, 0.57-0.8 of its ellipse, at every level); phone-counts: 12 plates up by 1-9 (IMG_2532
+667 -> 676 for 680), absolute errors summed 106 -> 99 there, the median 1.9 % either way but
+over 4 one-pixel shifts 2.3 -> 2.5 %; at 7 px/mm AGAR +3 matched for +7 reported, median
+count error 7.3 -> 9.2 %.
 """
 
 from __future__ import annotations
