@@ -35,8 +35,8 @@ and phone-counts' median by -0.1 to +0.6 points: within a pixel's jitter. Also m
 kept (2026-12-07, seventh session): counting the most cores none of which holds another over
 all levels (a part counts 1 when it is a core, or what the parts above it count, whichever is
 more), so that colonies whose domes part at different levels all count. AGAR: the same count
-on every plate (518's clumps of small colonies part into one long core per two colonies that
-overlap, 0.57-0.8 of its ellipse, at every level); phone-counts: 10 plates up by 1-9 (IMG_2532
+on every plate (in a clump of 518 looked at, two colonies that overlap stay one long core,
+0.57-0.8 of its ellipse, at every level); phone-counts: 10 plates up by 1-9 (IMG_2532
 667 -> 676 for 680), their absolute errors summed 106 -> 99, the median 1.9 % either way but
 over 4 one-pixel shifts 2.3 -> 2.5 %; at 7 px/mm AGAR +3 matched for +7 reported, median
 count error 7.3 -> 9.2 %.
