@@ -104,22 +104,20 @@ usable area's border, with eq. 1's background there (the rim's radial profile) i
 cell median: reported 1687 -> 1700 / 1697, matched 1626 -> 1631 / 1630 (F1 0.910 either way,
 recall 2-4 mm inside the edge 0.75 -> 0.80), phone-counts 1.9 -> 2.1 %; the band's lines and
 reflections gave false colonies on sparse plates (11890 +2, 11955 +1, 11773 +1).
-Large faint colonies that overlap eq. 1's foreground by more than ``max_overlap`` (11773,
-11884, 14130, 12033, 11955: 0.22-0.37 of their area) hold it in their cores (0.10-0.54 of
-the pixels at least half their depth inside), not along their edge as a ring colony would: a
-body whose overlap lies along its edge (at most 0.1 of its core, 0.5 of it all) allowed,
-reported +1, matched +0. Eq. 1's pixels there are specks the opening removes later; the
-overlap counted against eq. 1's foreground opened by 0.75 mm: reported 1687 -> 1701,
-matched 1626 -> 1631 (F1 0.909), median count error 5.7 -> 8.3 % (2026-12-07, seventh
-session). Of the 118 boxes of 4 mm and over whose centre lies in no reported body (some
-still matched, by a body's centroid in the box; that session), 38 lie below the threshold of
-both searches, 27 in the rim's band, about 30 in components too
-large or not round (touching faint colonies, texture) and 10 in ones overlapping eq. 1's
-foreground. Such components cut again above 1.25, 1.5 and 2 (or 1.5, 2 and 3) times the
-threshold, each piece tested as above: +1 matched, +2 reported. A second search smoothed by
-0.6 or 1 mm for bodies from 4 mm (more smoothing, less noise for a wide colony): +7 matched
-for +12 reported (phone-counts 4 -> 5 plates over 15 %), and +1 for +2; ``sigma_mm`` 0.5 or
-0.8 alone: F1 0.908 and 0.903.
+Large faint colonies that overlap eq. 1's foreground by more than ``max_overlap`` (11773, 11884,
+14130, 12033, 11955: 0.22-0.37 of their area) hold it in their cores (0.10-0.54 of the pixels at
+least half their depth inside), not along their edge as a ring colony would: a body whose overlap
+lies along its edge (at most 0.1 of its core, 0.5 of it all) allowed, reported +1, matched +0. Eq.
+1's pixels there are specks the opening removes later; the overlap counted against eq. 1's
+foreground opened by 0.75 mm: reported 1687 -> 1701, matched 1626 -> 1631 (F1 0.909), median count
+error 5.7 -> 8.3 % (2026-12-07, seventh session). Of the 118 boxes of 4 mm and over whose centre
+lies in no reported body (some still matched, by a body's centroid in the box; that session), 38
+lie below the threshold of both searches, 27 in the rim's band, about 30 in components too large or
+not round (touching faint colonies, texture) and 10 in ones overlapping eq. 1's foreground. Such
+components cut again above 1.25, 1.5 and 2 (or 1.5, 2 and 3) times the threshold, each piece tested
+as above: +1 matched, +2 reported. A second search smoothed by 0.6 or 1 mm for bodies from 4 mm
+(more smoothing, less noise for a wide colony): +7 matched for +12 reported (phone-counts 4 -> 5
+plates over 15 %), and +1 for +2; ``sigma_mm`` 0.5 or 0.8 alone: F1 0.908 and 0.903.
 
 A learned pass, tried and not kept (AGAR F1 0.895 as it stands): a small U-Net (16-64
 channels, 4 levels) on the work copy's signed difference from the coarse background, trained
