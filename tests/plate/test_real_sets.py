@@ -36,14 +36,15 @@ def _scored(run: str, folder: str) -> dict[str, Any]:
 def test_the_agar_photos_keep_their_colonies() -> None:
     """39 AGAR photos, 1886 boxed colonies: measured precision 0.964, recall 0.862, F1 0.910.
 
-    Without the faint-colony pass recall falls to 0.844 (F1 0.902), without the ring pass F1
-    to 0.900: the floors below tell such a loss from the jitter.
+    Without the faint-colony pass recall falls to 0.844 (F1 0.902), without the ring pass to
+    0.847 (F1 0.900): the recall floor tells such a loss from the jitter (0.858-0.866 over four
+    one-pixel shifts).
     """
     summary = _scored("run_agar_boxes", "agar-boxes")
     assert summary["plates"] == 39
     assert summary["recall"] >= 0.85
     assert summary["precision"] >= 0.95
-    assert summary["f1"] >= 0.905
+    assert summary["f1"] >= 0.90
     assert summary["median_count_error"] <= 0.12  # 5.7 % measured, 5.4-10.5 % over shifts
 
 
@@ -52,4 +53,4 @@ def test_the_phone_photos_count_as_their_lab_did() -> None:
     summary = _scored("run_phone_counts", "phone-counts")
     assert summary["plates"] == 28
     assert summary["median_count_error"] <= 0.035
-    assert summary["over_15"] <= 5  # 4 measured, 2 of them noted as not counted whole
+    assert summary["over_15"] <= 6  # 4 measured (4-5 over shifts), 2 noted as not counted whole
