@@ -12,25 +12,23 @@ without it; CI has it.
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+from bench_real_plates import RunOptions, run_agar_boxes, run_phone_counts
+
 REAL = Path(__file__).resolve().parents[3] / "shared" / "realplates"
-BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 
 
-def _scored(run: str, folder: str) -> dict[str, Any]:
+def _scored(run: Callable[..., dict[str, Any]], folder: str) -> dict[str, Any]:
     """The totals of one set, as ``bench_real_plates.py`` scores it (rows not printed)."""
     if not (REAL / folder).is_dir():
         pytest.skip(f"real plate photos not present ({REAL / folder})")
-    sys.path.insert(0, str(BENCHMARKS))
-    import bench_real_plates
-
-    return getattr(bench_real_plates, run)(
-        REAL / folder, set(), bench_real_plates.RunOptions(rows=False)
-    )
+    return run(REAL / folder, set(), RunOptions(rows=False))
 
 
 def test_the_agar_photos_keep_their_colonies() -> None:
@@ -40,7 +38,7 @@ def test_the_agar_photos_keep_their_colonies() -> None:
     0.847 (F1 0.900): the recall floor tells such a loss from the jitter (0.858-0.866 over four
     one-pixel shifts).
     """
-    summary = _scored("run_agar_boxes", "agar-boxes")
+    summary = _scored(run_agar_boxes, "agar-boxes")
     assert summary["plates"] == 39
     assert summary["recall"] >= 0.85
     assert summary["precision"] >= 0.95
@@ -50,7 +48,7 @@ def test_the_agar_photos_keep_their_colonies() -> None:
 
 def test_the_phone_photos_count_as_their_lab_did() -> None:
     """28 phone photos counted by hand: measured median count error 1.9 %."""
-    summary = _scored("run_phone_counts", "phone-counts")
+    summary = _scored(run_phone_counts, "phone-counts")
     assert summary["plates"] == 28
     assert summary["median_count_error"] <= 0.035
     assert summary["over_15"] <= 6  # 4 measured (4-5 over shifts), 2 noted as not counted whole
