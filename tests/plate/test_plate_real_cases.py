@@ -1,13 +1,17 @@
 """Plate analysis on the generator's cases that real photographs showed (exact truth).
 
-Crowding, faint translucent colonies, colonies at the meniscus, a dot-matrix label across the
-lid and a webcam's scale: each case is drawn with ``generate_plate`` and scored against its
+Crowding (over a thousand colonies), colonies down to 0.3 mm across, faint translucent
+colonies, colonies at the meniscus, a dot-matrix label across the lid and a webcam's scale: each case is drawn with ``generate_plate`` and scored against its
 exact truth. The limits leave room for what the module docstrings name as misses; they fail
 when a case breaks.
 """
 
 from __future__ import annotations
 
+import math
+
+import cv2
+import numpy as np
 import pytest
 
 from labauto.synthetic.plates import generate_plate, score_plate
@@ -20,15 +24,43 @@ def _score(**kwargs: object) -> tuple:
     return truth, result, score_plate(truth, result.colonies)
 
 
-def test_crowded_plate_is_counted_within_15_percent() -> None:
+def test_a_plate_of_over_a_thousand_colonies_is_counted_within_12_percent() -> None:
+    # measured: 1098 colonies of 0.5-1.6 mm, 91.7 % found, counted 7.6 % short, 2 false;
+    # with an opening of 1.2 mm rather than 0.75, 69 % found and 30 % short
     truth, result, score = _score(
-        n_authentic=1000, n_merged=0, n_mixed=0, colony_scale=0.45, artefacts=False
+        n_authentic=1150, n_merged=0, n_mixed=0, colony_scale=0.33, artefacts=False
     )
     n = truth.counts()["colonies_total"]
-    assert n >= 700  # the generator fits this many small colonies on the dish
-    assert score.found >= 0.85 * n
-    assert abs(result.counts["colonies_estimate"] - n) <= 0.15 * n
+    assert n >= 1000  # the generator fits this many small colonies on the dish
+    assert score.found >= 0.88 * n
+    assert abs(result.counts["colonies_estimate"] - n) <= 0.12 * n
     assert score.false_positives <= 0.01 * n
+
+
+def test_colonies_down_to_a_third_of_a_millimetre_are_found() -> None:
+    # 60 colonies of 0.3-0.8 mm on each of four agars. Measured: 215 of 240 found, 43 of the
+    # 58 under 0.4 mm, none false. An opening of 1 mm rather than 0.75 finds 191 in all; a
+    # least colony of 0.4 mm rather than 0.3, 36 of those under 0.4 mm
+    found, small, false = 0, [0, 0], 0
+    for agar in ("amber", "clear", "red_blood", "chocolate"):
+        img, truth = generate_plate(
+            2, n_authentic=60, n_merged=0, n_mixed=0, colony_scale=0.17, artefacts=False,
+            agar=agar,
+        )  # fmt: skip
+        result = analyze_plate(img)
+        false += score_plate(truth, result.colonies).false_positives
+        centroids = [colony.centroid for colony in result.colonies]
+        px_per_mm = 2 * truth.dish.radius / 90.0
+        for colony in truth.colonies:
+            outline = colony.contour.astype(np.float32).reshape(-1, 1, 2)
+            hit = any(cv2.pointPolygonTest(outline, c, False) >= 0 for c in centroids)
+            found += hit
+            if 2 * math.sqrt(colony.area_px / math.pi) < 0.4 * px_per_mm:
+                small[0] += hit
+                small[1] += 1
+    assert found >= 0.85 * 240
+    assert small[1] >= 40 and small[0] >= 0.65 * small[1]
+    assert false == 0
 
 
 def test_faint_translucent_colonies_are_found() -> None:
