@@ -46,6 +46,9 @@ Not found: rings under 2 mm, rings cut by another body, and the large soft-edged
 plates 12031 and 11924 (their edge spreads over a millimetre or more: no Canny edge). A second
 search at 2-4 px/mm (Canny 6-20, perfectness 0.3-0.8) did not find them either: it kept 0-5
 circles on 12031, whose missed large colonies stayed 19-20; AGAR F1 0.892-0.895 against 0.894.
+Swept again on the pipeline of 2026-12-07 (F1 0.910, eighth session): ``canny_high`` 30-60 with
+``perfectness`` 0.7-0.8 gave F1 0.910-0.911, median count error 5.7-6.5 %, phone-counts
+1.9-2.1 %.
 """
 
 from __future__ import annotations

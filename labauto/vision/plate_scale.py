@@ -18,6 +18,13 @@ pixels of one image:
   picking at 7 px/mm 429 -> 844 (native 879), at 4.5 px/mm those holding no boxed colony 58 -> 15;
   phone-counts' median count error 8.0 -> 6.1 % at 7 px/mm, 5.7 -> 6.2 % at 4.5 px/mm. Upsampling
   only to 10 px/mm was worse (F1 0.793, 0.725). Images between the two scales are used as they are.
+  A coarse frame's dust is a blur of a pixel or two that the resampling widens past the
+  opening: 24 generated plates (seeds 1000-1023, six agars) resampled to 7 and 4.5 px/mm show
+  20 and 28 false colonies, all dust specks (1 at their own scale). A least colony of 2-3 pixels
+  of the original frame, besides ``min_colony_diameter_mm``, was tried and not kept: with 2.5 px
+  17 and 7 false there, but on the AGAR photographs at 7 and 4.5 px/mm matched 1616 -> 1612 and
+  1591 -> 1581 for reported 1716 -> 1711 and 1712 -> 1696: real specks that small are colonies
+  about as often as not (2026-12-07, eighth session).
   Positions map back by the pixel-centre rule ``u = (u' + 0.5) / f - 0.5`` (origin at the centre of
   the top-left pixel), areas by ``1 / f**2``.
 """
