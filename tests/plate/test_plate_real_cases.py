@@ -1,9 +1,9 @@
 """Plate analysis on the generator's cases that real photographs showed (exact truth).
 
 Crowding (over a thousand colonies), colonies down to 0.3 mm across, faint translucent
-colonies, colonies at the meniscus, a dot-matrix label across the lid and a webcam's scale: each case is drawn with ``generate_plate`` and scored against its
-exact truth. The limits leave room for what the module docstrings name as misses; they fail
-when a case breaks.
+colonies, colonies at the meniscus, a dot-matrix label across the lid and a webcam's scale:
+each case is drawn with ``generate_plate`` and scored against its exact truth. The limits leave
+room for what the module docstrings name as misses; they fail when a case breaks.
 """
 
 from __future__ import annotations
