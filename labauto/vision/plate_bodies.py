@@ -39,8 +39,8 @@ class Bodies:
     gap rows are background), and a per-body reduction is a reduction over a range of rows.
     The canvas is as wide as the widest crop: mostly 2-3 times the crops' own area, but on
     the phone photo IMG_2523 one 563-px piece of the lid's ring line (a stroke) makes it
-    5.44 Mpx for 0.67 Mpx of crops, and the 8-Mpixel photo takes ~200 ms where the others take
-    50-120 ms. Bands of like widths would cut that; not done.
+    5.44 Mpx for 0.67 Mpx of crops, and that 8-Mpixel photo takes ~200 ms where the other phone
+    photos take 50-120 ms. Bands of like widths would cut that; not done.
 
     Attributes
     ----------
