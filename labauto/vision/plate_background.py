@@ -44,6 +44,14 @@ without confusing it with the agar's colour, and ``t`` stays fixed. Measured and
 * The agar's noise as the yardstick (``noise_factor``; the median of ``dev`` over the agar,
   2-35 levels squared over the plates of both sets): ``t`` is 17-300 times that median, so no
   one factor fits.
+* ``t`` times the square of the plate's strongest contrasts (the 99.9th percentile of
+  ``sqrt(dev)`` over the usable area: colonies, print, the wall's lines) over a reference,
+  never more than 1 (eighth session). They read 122-267 levels on the 67 photos as taken and
+  75-161 at 0.6 times: a reference of 120 leaves every photo as taken alone and gives 0.879 /
+  9.1 % at 0.6 times (phone-counts 2.3 %). But that reference is the least of these sets:
+  150 and 180, which lower ``t`` on the photos as taken whose contrasts are modest, give 0.907
+  and 0.894 there (phone-counts 2.8 % at 180). The measure is the plate's content as much as
+  its exposure, and a plate of other sets with modest contrasts would lose the same way.
 
 Also measured and not kept: the deviation's part across the grey axis (its hue) weighted ``k``
 times its part along it (the agar's texture is mostly brightness, many faint colonies differ
