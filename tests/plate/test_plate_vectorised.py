@@ -177,14 +177,17 @@ def test_canvas_measures_equal_per_crop_measures(stages: list) -> None:
                 assert bodies.concavity[b] == math.inf  # not needed: never a DES
 
 
-@pytest.mark.parametrize("least_peak", [0.0, 6.0])
+@pytest.mark.parametrize(("least_peak", "widest"), [(0.0, True), (6.0, True), (0.0, False)])
 def test_vectorised_mix_scores_and_merged_counts_equal_per_body(
-    stages: list, least_peak: float
+    stages: list, least_peak: float, widest: bool
 ) -> None:
+    # without the widest body the two stages work on a canvas cut to the others' width
     floored = 0  # bodies whose count the floor changed: the floor must be exercised
     filled = 0  # DES-shaped bodies with holes, counted filled: the path must be exercised
     for roi, contours, fg, des_shape, bodies, params in stages:
         everyone = ~bodies.stroke
+        if not widest:
+            everyone &= bodies.width < bodies.width[everyone].max()
         round_outline = des_shape[bodies.index]
         scores, _ = plate_bodies.mix_scores(roi, bodies, everyone, params)
         counts = plate_bodies.merged_counts(
