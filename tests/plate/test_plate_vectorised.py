@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from labauto.vision import dish as dish_module
-from labauto.vision import plate_area, plate_bodies, plate_cores, plate_objects
+from labauto.vision import plate_area, plate_bodies, plate_canvas, plate_cores, plate_objects
 from labauto.vision.plate import PlateParams, analyze_plate
 from labauto.vision.plate_background import deviation
 
@@ -175,6 +175,23 @@ def test_canvas_measures_equal_per_crop_measures(stages: list) -> None:
                 assert bodies.concavity[b] == ref["concavity"]
             else:
                 assert bodies.concavity[b] == math.inf  # not needed: never a DES
+
+
+def test_bodies_measured_band_by_band_equal_one_band(
+    stages: list, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # a band for nearly every crop, against one band for the whole canvas: the same bodies
+    for _, contours, fg, des_shape, _, params in stages:
+        measured = []
+        for waste in (0, 10**12):
+            monkeypatch.setattr(plate_canvas, "_BAND_WASTE", waste)
+            measured.append(plate_bodies.measure_bodies(contours, fg, des_shape, params, {}))
+        banded, whole = measured
+        monkeypatch.setattr(plate_canvas, "_BAND_WASTE", 0)
+        slot = np.diff(np.append(banded.row, len(banded.row_body)))
+        assert len(plate_canvas.bands_of(banded.row, slot, banded.width, slot.sum())) > 10
+        for name in ("mask", "dt", "area", "r_in", "stroke", "concavity"):
+            np.testing.assert_array_equal(getattr(banded, name), getattr(whole, name))
 
 
 @pytest.mark.parametrize(("least_peak", "widest"), [(0.0, True), (6.0, True), (0.0, False)])
