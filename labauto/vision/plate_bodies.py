@@ -38,16 +38,11 @@ class Bodies:
     transform, dilation, connected components) treats all bodies at once and gives, inside
     every crop, exactly what it gives on the crop alone (the crop's rim of ``PAD`` px and the
     gap rows are background), and a per-body reduction is a reduction over a range of rows.
-    The canvas is as wide as the widest crop: mostly 2-3 times the crops' own area, but on
-    the phone photo IMG_2523 one 563-px piece of the lid's ring line (a stroke) among 364
-    bodies at most 51 px wide makes it 5.44 Mpx for 0.67 Mpx of crops. The steps over all
-    bodies (closing, holes, distance transform) therefore run band by band
-    (:mod:`labauto.vision.plate_canvas`: 0.92 Mpx there), and those over some of them
+    The canvas is as wide as the widest crop, so one long stroke among many small bodies
+    makes it mostly empty: the steps over all bodies (closing, holes, distance transform)
+    run band by band (:mod:`labauto.vision.plate_canvas`), and those over some of them
     (concavities, merged counts, mixed scores, cores) on the canvas cut to the widest of
-    those, which strokes seldom are. Taking turns with the code before (median of 7 runs,
-    twice each): IMG_2523 192-193 -> 137-143 ms, IMG_2531 80-81 -> 66-68 ms, the other
-    photos and the generator's plates as before; every colony of the 67 photos and of 14
-    generated plates the same, at their size and at a fifth of it.
+    those.
 
     Attributes
     ----------

@@ -8,7 +8,15 @@ of the lid's ring line among 364 bodies at most 51 px wide makes a canvas of 5.4
 consecutive crops (whole canvas rows, the gap rows after them included) as wide as its widest
 crop. A crop starts a new band when the current one would, with it, leave more than
 ``_BAND_WASTE`` canvas pixels empty beside its crops (a few times what the OpenCV calls of
-one more band cost); a plate of crops of like widths keeps one band or a few.
+one more band cost); a plate of crops of like widths keeps one band or a few. IMG_2523's
+canvas becomes 6 bands of 0.92 Mpx in all.
+
+Measured, taking turns with the code before (median of 7 analyses, twice each; the steps
+over some of the bodies also cut the canvas to the widest of those, which strokes seldom
+are): IMG_2523 192-193 -> 137-143 ms, IMG_2531 80-81 -> 66-68 ms, the other photos and the
+generator's plates as before (``bench_plate``: 38.3 against 38.2 ms); every colony of the 67
+photos and of 14 generated plates the same, at their size and at a fifth of it, and with a
+band for nearly every crop.
 
 Each helper gives exactly what the plain call gives on the whole canvas: crops are ``PAD`` px
 of background away from their box on every side and never share a row, so an operation that
@@ -47,15 +55,12 @@ def bands_of(row: np.ndarray, slot: np.ndarray, width: np.ndarray, n_rows: int) 
 def on_bands(op: Callable[..., np.ndarray], bands: list[Band], *canvases: np.ndarray) -> np.ndarray:
     """``op`` of the canvases, band by band (each canvas cut to the band), into one canvas
     of the first's shape, zero outside the bands."""
-    if len(bands) == 1:
+    if len(bands) == 1:  # the whole canvas
         return op(*(canvas[:, : bands[0][2]] for canvas in canvases))
-    out = None
-    for r0, r1, w in bands:
-        part = op(*(canvas[r0:r1, :w] for canvas in canvases))
-        if out is None:
-            out = np.zeros(canvases[0].shape, part.dtype)
+    parts = [op(*(canvas[r0:r1, :w] for canvas in canvases)) for r0, r1, w in bands]
+    out = np.zeros(canvases[0].shape, parts[0].dtype)
+    for (r0, r1, w), part in zip(bands, parts, strict=True):
         out[r0:r1, :w] = part
-    assert out is not None  # bands is never empty
     return out
 
 
