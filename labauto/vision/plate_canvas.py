@@ -19,10 +19,11 @@ photos and of 14 generated plates the same, at their size and at a fifth of it, 
 band for nearly every crop.
 
 Each helper gives exactly what the plain call gives on the whole canvas: crops are ``PAD`` px
-of background away from their box on every side and never share a row, so an operation that
-reaches at most 2 px (the 5x5 closing, the 3x3 distance transform) sees the same pixels in a
-band as on the canvas, nothing outside the bands is foreground, and connected components,
-numbered band after band, keep the canvas's raster order.
+of background away from their box on every side and never share a row, and nothing outside
+the bands is foreground. So the 5x5 closing, which reaches 2 px, sees the same pixels in a
+band as on the canvas; a pixel's distance transform is its distance to the nearest background,
+which lies in its own crop; and connected components, numbered band after band, keep the
+canvas's raster order.
 """
 
 from __future__ import annotations
