@@ -87,15 +87,16 @@ class Bodies:
     concavity: np.ndarray
     elongation: np.ndarray
 
-    def slots_of(self, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def slots_of(self, which: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         """A smaller canvas of only the bodies where ``which`` is true (the layout's rules
-        still hold): which canvas rows it keeps, and each body's first row on it (0 for the
-        others)."""
+        still hold): which canvas rows it keeps, each body's first row on it (0 for the
+        others), and its width, the widest of those bodies' crops (a stroke left out no
+        longer widens it)."""
         slot = np.diff(np.append(self.row, len(self.row_body)))
         rows = which[np.repeat(np.arange(len(slot)), slot)]
         first_row = np.zeros(len(slot), np.intp)
         first_row[which] = np.cumsum(slot[which]) - slot[which]
-        return rows, first_row
+        return rows, first_row, int(self.width[which].max(initial=1))
 
 
 def moment_test(contour: np.ndarray, params: PlateParams) -> tuple[str | None, float]:
@@ -386,8 +387,7 @@ def merged_counts(
     if not which.any():
         return counts
     counts[which] = MIN_MERGED_COUNT
-    rows, first_row = bodies.slots_of(which)
-    width = int(bodies.width[which].max())  # the canvas of these bodies alone: as wide as they
+    rows, first_row, width = bodies.slots_of(which)
     dt, row_body = bodies.dt[rows, :width], bodies.row_body[rows]
     r_in = bodies.r_in
     if count_mask is not None or (round_outline is not None and (round_outline & which).any()):

@@ -85,9 +85,8 @@ def core_counts(
     if not which.any():
         return counts
     # a smaller canvas of only these bodies' slots, as wide as the widest of them
-    rows, first_row = bodies.slots_of(which)
+    rows, first_row, width = bodies.slots_of(which)
     row_body = bodies.row_body[rows]
-    width = int(bodies.width[which].max())
     inside = bodies.mask[rows, :width] > 0
     canvas = np.zeros(inside.shape, np.float32)
     sigma = max(_SIGMA_RATIO * single_r, 0.5)
