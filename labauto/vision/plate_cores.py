@@ -18,7 +18,12 @@ clump falls apart into one round core per colony. This is the multi-threshold id
   filling at least ``_CORE_FILL`` (0.85) of the ellipse inscribed in its bounding box, and no
   more than 1 / ``_CORE_ASPECT`` (0.6) times as long as wide. Read from the components'
   statistics, all bodies at once on the bodies' shared canvas (:class:`Bodies`), one pass per
-  level.
+  level. Only the bodies with a dome (below) are labelled, on the canvas cut to them and in
+  bands of like widths (:mod:`labauto.vision.plate_canvas`); each body's levels come from a
+  partial sort of its own values. On the 15-Mpixel AGAR plate 525 (25 clumps of large
+  colonies) this took the cores from 36 to 24 ms (median of 15, taking turns), with the
+  same counts on every plate; on the crowded phone photos (104-163 clumps) they stay at
+  11-17 ms.
 * **A dome to cut.** A body whose smoothed departure rises by less than ``least_range``
   from its 5th to its 95th percentile has no dome, only noise or texture, and is not cut:
   :mod:`labauto.vision.plate` passes half of eq. 1's threshold as a colour distance
@@ -50,6 +55,7 @@ import cv2
 import numpy as np
 
 from labauto.vision.plate_bodies import Bodies
+from labauto.vision.plate_canvas import bands_of
 
 _SIGMA_RATIO = 0.08  # smoothing of the departure, times the single-colony radius
 _LEVELS = 12  # levels per body, from its 5th to its 95th percentile
@@ -84,48 +90,53 @@ def core_counts(
     which = which & (bodies.area >= 2 * least_area)  # room for two cores at least
     if not which.any():
         return counts
-    # a smaller canvas of only these bodies' slots, as wide as the widest of them
-    rows, first_row, width = bodies.slots_of(which)
-    row_body = bodies.row_body[rows]
-    inside = bodies.mask[rows, :width] > 0
-    canvas = np.zeros(inside.shape, np.float32)
+    # each body's departure, smoothed over its crop's neighbourhood (so as over the whole ROI),
+    # and its levels; only the bodies with a dome to cut go on to be labelled
     sigma = max(_SIGMA_RATIO * single_r, 0.5)
     reach = math.ceil(4 * sigma) + 1  # beyond OpenCV's kernel: the same as over the whole ROI
     height, width_roi = departure.shape
+    at_quantile = np.linspace(0.05, 0.95, _LEVELS)
+    levels = np.full((_LEVELS, len(which)), np.inf, np.float32)
+    smoothed: dict[int, np.ndarray] = {}
     for b in np.flatnonzero(which).tolist():
-        r = first_row[b]
         t, lft, h, w = bodies.top[b], bodies.left[b], bodies.height[b], bodies.width[b]
         y0, x0 = max(t - reach, 0), max(lft - reach, 0)
         y1, x1 = min(t + h + reach, height), min(lft + w + reach, width_roi)
         distance = cv2.GaussianBlur(cv2.sqrt(departure[y0:y1, x0:x1]), (0, 0), sigma)
-        canvas[r : r + h, :w] = distance[t - y0 : t - y0 + h, lft - x0 : lft - x0 + w]
-    inside &= row_body[:, None] >= 0
-    ys, xs = np.nonzero(inside)
-    body = row_body[ys]  # non-decreasing: the canvas holds the bodies row after row
-    values = canvas[ys, xs]
-    # each body's values in order: one sort of a key that puts the bodies apart
-    order = np.argsort(body * (float(values.max(initial=0.0)) + 1.0) + values)
-    body, values = body[order], values[order]
-    first = np.searchsorted(body, np.arange(len(which)))
-    size = np.bincount(body, minlength=len(which))
-    quantiles = np.linspace(0.05, 0.95, _LEVELS)
-    levels = np.full((_LEVELS, len(which)), np.inf, np.float32)
-    has = size > 0
-    at = first[has] + np.floor(quantiles[:, None] * (size[has] - 1)).astype(np.intp)
-    levels[:, has] = values[at]
-    rise = np.zeros(len(which), np.float32)
-    rise[has] = levels[-1, has] - levels[0, has]
-    levels[:, rise < least_range] = np.inf  # no dome to cut: noise and texture
-    for level in levels:
-        row_level = level[np.maximum(row_body, 0)]
-        above = (inside & (canvas > row_level[:, None])).view(np.uint8)
-        n, _, stats, _ = cv2.connectedComponentsWithStats(above, connectivity=8)
-        if n <= 1:
+        distance = distance[t - y0 : t - y0 + h, lft - x0 : lft - x0 + w]
+        values = distance[bodies.mask[bodies.row[b] : bodies.row[b] + h, :w] > 0]
+        if values.size == 0:
             continue
-        top, w, h, area = (stats[1:, k] for k in (1, 2, 3, 4))
-        core = area >= least_area
-        core &= area >= _CORE_FILL * math.pi / 4 * w * h
-        core &= np.minimum(w, h) >= _CORE_ASPECT * np.maximum(w, h)
-        found = np.bincount(row_body[top[core]], minlength=len(which))
-        counts = np.maximum(counts, found)
+        at = np.floor(at_quantile * (values.size - 1)).astype(np.intp)
+        level = np.partition(values, at)[at]
+        if level[-1] - level[0] >= least_range:  # else no dome to cut: noise and texture
+            levels[:, b] = level
+            smoothed[b] = distance
+    dome = np.zeros(len(which), bool)
+    dome[list(smoothed)] = True
+    if not dome.any():
+        return counts
+    # a smaller canvas of only these bodies' slots, in bands (:mod:`plate_canvas`)
+    rows, first_row, width = bodies.slots_of(dome)
+    row_body = bodies.row_body[rows]
+    inside = (bodies.mask[rows, :width] > 0) & (row_body[:, None] >= 0)
+    canvas = np.zeros(inside.shape, np.float32)
+    for b, distance in smoothed.items():
+        r = first_row[b]
+        canvas[r : r + distance.shape[0], : distance.shape[1]] = distance
+    slot = np.diff(np.append(bodies.row, len(bodies.row_body)))
+    bands = bands_of(first_row[dome], slot[dome], bodies.width[dome], len(row_body))
+    for level in levels:
+        above = (inside & (canvas > level[np.maximum(row_body, 0)][:, None])).view(np.uint8)
+        for r0, r1, band_width in bands:
+            part = above[r0:r1, :band_width]
+            n, _, stats, _ = cv2.connectedComponentsWithStats(part, connectivity=8)
+            if n <= 1:
+                continue
+            top, w, h, area = (stats[1:, k] for k in (1, 2, 3, 4))
+            core = area >= least_area
+            core &= area >= _CORE_FILL * math.pi / 4 * w * h
+            core &= np.minimum(w, h) >= _CORE_ASPECT * np.maximum(w, h)
+            found = np.bincount(row_body[top[core] + r0], minlength=len(which))
+            counts = np.maximum(counts, found)
     return counts
