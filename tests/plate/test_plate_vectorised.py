@@ -251,7 +251,13 @@ def _reference_cores(departure: np.ndarray, ref: dict, single_r: float, least_ra
     return best
 
 
-def test_core_counts_on_the_canvas_equal_per_body(plates: list) -> None:
+@pytest.mark.parametrize("band_waste", [None, 0])
+def test_core_counts_on_the_canvas_equal_per_body(
+    plates: list, band_waste: int | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # with the bands as they come, and with a band for every crop (labelled one by one)
+    if band_waste is not None:
+        monkeypatch.setattr(plate_canvas, "_BAND_WASTE", band_waste)
     split = 0  # bodies with two or more cores: the counting must be exercised
     for img, _ in plates[:3]:
         _, copy, params, (x0, y0), usable, _ = plate_area.prepare_plate(
