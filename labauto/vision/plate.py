@@ -74,7 +74,7 @@ Pipeline and the choices it makes where the paper leaves room:
    (``mix_score``) is at least ``mix_fraction``: a sector or speckles of a second species of
    another colour or brightness. A DES whose outliers hold one round spot of 0.4 mm or more
    (a small colony sitting on a large one, too small a share for the fraction) is mixed too
-   (:func:`labauto.vision.plate_bodies.mix_scores`). The rule is absolute, not relative to the
+   (:func:`labauto.vision.plate_mixed.mix_scores`). The rule is absolute, not relative to the
    plate's other colonies, so a plate of only mixed colonies is still read right.
 5. **Merged count.** Peaks of the merged body's distance transform (one per plateau), kept
    greedily from the highest; a peak is a new colony when the distance transform along the
@@ -151,17 +151,11 @@ import numpy as np
 from labauto.vision.dish import Dish, find_dish
 from labauto.vision.image import as_image
 from labauto.vision.plate_area import prepare_plate
-from labauto.vision.plate_bodies import (
-    LARGE_BODY_RATIO,
-    MIN_SINGLES,
-    PAD,
-    measure_bodies,
-    merged_counts,
-    mix_scores,
-    pair_counts,
-)
+from labauto.vision.plate_bodies import MIN_SINGLES, PAD, measure_bodies
 from labauto.vision.plate_cores import core_counts
+from labauto.vision.plate_counts import merged_counts, pair_counts
 from labauto.vision.plate_ink import ink_bodies, without_ink
+from labauto.vision.plate_mixed import LARGE_BODY_RATIO, mix_scores
 from labauto.vision.plate_objects import (
     agar_background,
     objects_by_detector,

@@ -1,13 +1,15 @@
-"""The bodies of a plate: artefact tests, waists, mixed-colony scores and merged counts.
+"""The bodies of a plate: artefact tests, masks, holes, inscribed radii and waists.
 
-Steps 3-5 of :mod:`labauto.vision.plate` (its docstring gives the rules): every object that
+Steps 3-4 of :mod:`labauto.vision.plate` (its docstring gives the rules): every object that
 passes the contour's moment tests becomes a body whose mask lies on one shared canvas
-(:class:`Bodies`), so each measure is one OpenCV or numpy call over all bodies.
+(:class:`Bodies`), so each measure is one OpenCV or numpy call over all bodies. What is read
+from the bodies afterwards lives beside: their mixed-colony scores
+(:mod:`labauto.vision.plate_mixed`), their colony counts (:mod:`labauto.vision.plate_counts`)
+and the cores of clumps (:mod:`labauto.vision.plate_cores`).
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 
@@ -17,14 +19,10 @@ import numpy as np
 from labauto.vision.plate_canvas import Band, bands_of, components, nonzero, on_bands, per_row
 from labauto.vision.plate_params import PlateParams
 
-MIN_MERGED_COUNT = 1  # a body that is not a DES but shows one peak: one colony, not pickable
 PAD = 3  # margin (px) around a body's mask; bodies this close to the usable border are dropped
 HOLE_SHARE = 0.1  # a hole under this share of its body's filled contour is part of the body
 MIN_SINGLES = 3  # single colonies a plate needs before their median area is a yardstick
 _DISC5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
-SPOT_MM = 0.4  # a second colony on a colony: a round spot of outliers at least this wide ...
-SPOT_ROUNDNESS = 0.7  # ... both ways, filling this share of the ellipse in its bounding box
-LARGE_BODY_RATIO = 1.5  # a body this many times as wide as the plate's single colonies is large
 _GAP = 2  # empty canvas rows between two bodies' crops (the 5x5 filters reach 2 px)
 
 
@@ -251,206 +249,6 @@ def _small_holes_filled(
     return out
 
 
-def mix_scores(
-    roi: np.ndarray, bodies: Bodies, which: np.ndarray, params: PlateParams
-) -> tuple[np.ndarray, np.ndarray]:
-    """Mixed-colony score of the bodies where ``which`` is true, all at once (step 4; 0 elsewhere).
-
-    Per body, the inner pixels' B, G, R are fitted by ``c0 + c1 s + c2 s^2`` with ``s`` the
-    distance to the boundary over its maximum (least squares, solved for all bodies together);
-    the score is the fraction of inner pixels farther than ``mix_residual`` from the fit. Every
-    second row and column of the body's crop is used (a speckle of 2 px radius still gives
-    samples).
-
-    Also returned: how many round spots a body's outliers hold (connected pieces at least
-    ``SPOT_MM`` across both ways, filling ``SPOT_ROUNDNESS`` of the ellipse inscribed in their
-    bounding box): small colonies sitting on a large one, too small a share of it for the
-    score. Measured on the colonies offered for picking on the AGAR photographs (their
-    outliers at the photo's own resolution): the three that held a small boxed colony on a
-    large one had spots 0.61-0.84 mm across filling 0.92-0.96 of their enclosing circle; the
-    single colonies' largest outlier pieces, a textured centre or the arcs of concentric
-    rings, filled at most 0.69. In the analysis (every second pixel at 12 px/mm), the spot
-    rule takes 3 of the 7 offered colonies holding two boxed ones out of the picking list,
-    and 12 single colonies with them (1.4 % of 886); 0.5 mm takes the same, roundness 0.8
-    only 2 and 7 singles.
-    """
-    k = len(bodies.index)
-    score = np.zeros(k)
-    if not which.any():
-        return score, np.zeros(k, np.intp)
-    # inner samples: every second row and column of the crops (crops start at even rows), on
-    # the canvas as wide as these bodies
-    dt = bodies.dt[::2, : int(bodies.width[which].max()) : 2]
-    body_of_row = bodies.row_body[::2]
-    row_wanted = (body_of_row >= 0) & which[np.maximum(body_of_row, 0)]
-    inner = (dt >= params.edge_skip_px) & row_wanted[:, None]
-    sub_y, sub_x = np.nonzero(inner)  # body after body, each in raster order
-    label = body_of_row[sub_y]
-    crop_y, crop_x = 2 * sub_y - bodies.row[label], 2 * sub_x
-    in_crop = crop_x < bodies.width[label]
-    if not in_crop.all():  # edge_skip_px <= 0 takes in the background beside the crop
-        sub_y, sub_x, label = sub_y[in_crop], sub_x[in_crop], label[in_crop]
-        crop_y, crop_x = crop_y[in_crop], crop_x[in_crop]
-    sizes = np.bincount(label, minlength=k)
-    if sizes.sum() == 0:
-        return score, np.zeros(k, np.intp)
-    starts = np.cumsum(sizes) - sizes
-    c = roi[bodies.top[label] + crop_y, bodies.left[label] + crop_x].astype(np.float32)
-    depth_scale = (1.0 / np.maximum(bodies.r_in, 1e-6)).astype(np.float32)
-    s = dt[sub_y, sub_x] * depth_scale[label]  # normalised depth, 0 at the boundary
-    s2 = s * s
-    # per-body sums of every product the normal equations need, in one pass (one row per
-    # pixel; summed row after row, i.e. in pixel order, per body)
-    products = np.empty((len(s), 14))
-    products[:, 0] = 1.0
-    products[:, 1] = s
-    products[:, 2] = s2
-    products[:, 3] = s2 * s
-    products[:, 4] = s2 * s2
-    products[:, 5:8] = c  # times s ** 0
-    products[:, 8:11] = s[:, None] * c
-    products[:, 11:14] = s2[:, None] * c
-    nonempty = sizes > 0
-    sums = np.zeros((k, 14))
-    sums[nonempty] = np.add.reduceat(products, starts[nonempty], axis=0)
-    gram = np.stack([sums[:, i : i + 3] for i in range(3)], axis=1) + np.eye(3) * 1e-6
-    rhs = sums[:, 5:14].reshape(k, 3, 3)  # [body, power of s, channel]
-    coef = np.linalg.solve(gram, rhs).astype(np.float32)[label]
-    resid = c - (coef[:, 0] + s[:, None] * coef[:, 1] + s2[:, None] * coef[:, 2])
-    off = np.einsum("ij,ij->i", resid, resid) > params.mix_residual**2
-    score = np.bincount(label, off, minlength=k) / np.maximum(sizes, 1)
-    score[sizes < 8] = 0.0  # too few inner samples to judge
-    spots = np.zeros(k, np.intp)
-    spot_px = SPOT_MM * float(params.px_per_mm or 0.0) / 2  # on the grid of every second pixel
-    if spot_px > 0 and off.any():
-        spots = _round_spots(off, sub_y, sub_x, dt.shape, body_of_row, spot_px, k)
-    return score, spots
-
-
-def _round_spots(
-    off: np.ndarray,
-    sub_y: np.ndarray,
-    sub_x: np.ndarray,
-    shape: tuple[int, ...],
-    body_of_row: np.ndarray,
-    spot_px: float,
-    k: int,
-) -> np.ndarray:
-    """How many round spots at least ``spot_px`` across each body's outlier samples (``off``
-    at ``sub_y, sub_x`` on the half-resolution canvas of ``shape``) hold."""
-    canvas = np.zeros(shape, np.uint8)
-    canvas[sub_y[off], sub_x[off]] = 1
-    _, _, stats, _ = cv2.connectedComponentsWithStats(canvas, connectivity=8)
-    area = stats[1:, cv2.CC_STAT_AREA].astype(np.float64)
-    width, height = stats[1:, cv2.CC_STAT_WIDTH], stats[1:, cv2.CC_STAT_HEIGHT]
-    ellipse = math.pi / 4 * width * height  # the ellipse inscribed in the spot's box
-    spot = (np.minimum(width, height) >= spot_px) & (area >= SPOT_ROUNDNESS * ellipse)
-    # no canvas row holds two bodies: a spot's top row names its body
-    return np.bincount(body_of_row[stats[1:, cv2.CC_STAT_TOP][spot]], minlength=k)
-
-
-def merged_counts(
-    bodies: Bodies,
-    which: np.ndarray,
-    valley_ratio: float,
-    least_peak: float = 0.0,
-    round_outline: np.ndarray | None = None,
-    count_mask: np.ndarray | None = None,
-) -> np.ndarray:
-    """Colonies in each merged body (where ``which`` is true; 1 elsewhere), all at once.
-
-    Step 5: one peak per plateau of the distance transform's local maxima (5x5), above
-    ``max(2, least_peak, 0.3 r_in)``, at its highest pixel (the first in raster order on a
-    tie); peaks are taken greedily from the highest (plateaus of equal height in the order
-    OpenCV labels a crop: by their first 2x2 block in raster order), and a peak is kept when
-    the straight segment to every peak kept before it dips below ``valley_ratio`` times the
-    lower of the two. At least ``MIN_MERGED_COUNT`` (1). The segments between all pairs of
-    peaks of a body are sampled at once. ``least_peak`` (px) is the plate's yardstick for a
-    colony's centre (:attr:`PlateParams.peak_floor_ratio`); 0 leaves it out.
-
-    The bodies where ``round_outline`` is true (their outline is a DES: centroid inside, small
-    D_alpha) are counted with all their holes filled: round a hole the distance transform has
-    a ring of peaks, and a round outline with a hole is one colony with a translucent part or a
-    reflection across it (AGAR plates 14130 and 14627 had such colonies counted 4-6). A chain of
-    colonies closed round a patch of agar has no round outline, and keeps its hole. Measured on
-    the AGAR photographs: reported 1575 -> 1565, matched 1485 either way (F1 0.858 -> 0.861);
-    filling the holes of every body also took 5 matched colonies of such chains. An open ring
-    (a C: phone photo IMG_2525's ring about 1.7 mm across counted 3) is no DES either.
-    Counting 1 every body of two or more that surrounds its centroid (the centroid outside
-    it, its outline in 18 or 22 of 24 directions from it) cost 9 or 2 matched AGAR colonies
-    (median count error 5.7 -> 7.3 %): such chains curl round agar as well. Not kept.
-
-    ``count_mask`` (a canvas as ``bodies.mask``) replaces the bodies' masks for counting: the
-    masks without the printed ink across them (:func:`labauto.vision.plate_ink.without_ink`).
-    """
-    counts = np.ones(len(bodies.index), np.intp)
-    if not which.any():
-        return counts
-    counts[which] = MIN_MERGED_COUNT
-    rows, first_row, width = bodies.slots_of(which)
-    dt, row_body = bodies.dt[rows, :width], bodies.row_body[rows]
-    r_in = bodies.r_in
-    if count_mask is not None or (round_outline is not None and (round_outline & which).any()):
-        solid = (bodies.mask if count_mask is None else count_mask)[rows, :width]
-        if round_outline is not None:
-            solid = holes_filled(solid, row_body, round_outline)
-        dt = cv2.distanceTransform(solid, cv2.DIST_L2, 3)
-        r_in = np.zeros(len(which))
-        r_in[which] = np.maximum.reduceat(dt.max(axis=1), first_row[which])
-    floor = np.maximum(max(2.0, least_peak), 0.3 * r_in)
-    floor_of_row = np.where(row_body >= 0, floor[np.maximum(row_body, 0)], np.inf)
-    cand = (dt >= cv2.dilate(dt, _DISC5)) & (dt >= floor_of_row[:, None])
-    n, labels = cv2.connectedComponents(cand.view(np.uint8), connectivity=8)
-    if n <= 1:
-        return counts
-    ys, xs = np.nonzero(cand)  # raster order
-    plateau, value = labels[ys, xs], dt[ys, xs]
-    order = np.lexsort((-value, plateau))  # by plateau, highest first, raster order on ties
-    first = order[np.searchsorted(plateau[order], np.arange(1, n))]
-    first_block = np.full(n, np.iinfo(np.intp).max)
-    np.minimum.at(first_block, plateau, (ys // 2) * dt.shape[1] + xs // 2)
-    peaks = first[np.argsort(first_block[1:], kind="stable")]  # body after body (rows)
-    body = row_body[ys[peaks]]
-    pv = value[peaks].astype(np.float64)
-    peaks = peaks[np.lexsort((-pv, body))]  # per body, highest first (stable on ties)
-    body, pv = row_body[ys[peaks]], value[peaks].astype(np.float64)
-    px, py = xs[peaks], ys[peaks] - first_row[body]  # crop coordinates
-    # every pair (j, i) of peaks of one body with i before j
-    bounds = np.flatnonzero(np.diff(body, prepend=-1, append=-1))
-    pairs = [
-        (j, i)
-        for lo, hi in itertools.pairwise(bounds.tolist())
-        for j in range(lo + 1, hi)
-        for i in range(lo, j)
-    ]
-    if not pairs:
-        return counts
-    jj, ii = np.array(pairs, np.intp).T
-    # the segment from peak j to peak i, sampled as np.linspace(p_j, p_i, m) in crop pixels
-    dx, dy = px[ii] - px[jj], py[ii] - py[jj]
-    m = np.sqrt((dx * dx + dy * dy).astype(np.float64)).astype(np.intp) + 2
-    seg_start = np.cumsum(m) - m
-    pair = np.repeat(np.arange(len(m)), m)
-    t = (np.arange(pair.size) - seg_start[pair]).astype(np.float64)
-    lx = t * (dx / (m - 1))[pair] + px[jj][pair]
-    ly = t * (dy / (m - 1))[pair] + py[jj][pair]
-    last = seg_start + m - 1
-    lx[last], ly[last] = px[ii], py[ii]
-    samples = dt[ly.round().astype(np.intp) + first_row[body[jj]][pair], lx.round().astype(np.intp)]
-    valley = np.minimum.reduceat(samples, seg_start)  # lowest point of every segment
-    joined = valley >= valley_ratio * np.minimum(pv[jj], pv[ii])  # no waist between j and i
-    joined_to: dict[int, set[int]] = {}
-    for j, i in zip(jj[joined].tolist(), ii[joined].tolist(), strict=True):
-        joined_to.setdefault(j, set()).add(i)
-    for lo, hi in itertools.pairwise(bounds.tolist()):
-        kept: list[int] = []
-        for j in range(lo, hi):
-            if not joined_to.get(j, set()).intersection(kept):
-                kept.append(j)
-        counts[body[lo]] = max(MIN_MERGED_COUNT, len(kept))
-    return counts
-
-
 def holes_filled(mask: np.ndarray, row_body: np.ndarray, bodies: np.ndarray) -> np.ndarray:
     """Canvas ``mask`` (0 / 1; ``row_body``: the body of every row) with every hole of the
     bodies where ``bodies`` is true filled. A hole is background that the background round the
@@ -460,29 +258,3 @@ def holes_filled(mask: np.ndarray, row_body: np.ndarray, bodies: np.ndarray) -> 
     holes = cv2.compare(outside[1:-1, 1:-1], 0, cv2.CMP_EQ) & cv2.compare(mask, 0, cv2.CMP_EQ)
     holes[~((row_body >= 0) & bodies[np.maximum(row_body, 0)])] = 0
     return mask | (holes & 1)
-
-
-def pair_counts(
-    bodies: Bodies, counts: np.ndarray, authentic: np.ndarray, pair_elongation: float
-) -> np.ndarray:
-    """``counts`` with the merged bodies of one peak that are two colonies counted 2 (step 5).
-
-    Two colonies that overlap by more than about half their diameter leave no waist for the
-    distance transform, so :func:`merged_counts` finds one peak. Such a body is longer than a
-    single colony (axis ratio at least ``pair_elongation``; single colonies on the AGAR
-    photographs: 1.01-1.21, 5th-95th percentile) and at least as large as the plate's median
-    single colony (``authentic``: the authentic and mixed DES, ``MIN_SINGLES`` or more); a
-    small or round irregular colony is neither.
-    Measured on the AGAR photographs: of the one-peak merged bodies, 36 of the 52 that hold two
-    or more boxed colonies and 13 of the 255 that hold one or none pass both.
-    Tried and not kept: the axis ratio of the body opened by a disc of 0.5, 0.8 or 1.0 times
-    its inscribed radius, so that pieces of the wall's lines stuck to a colony at the rim do
-    not make it long (phone photo IMG_2528: one colony counted 2, 14 for 12): AGAR F1 0.911,
-    0.909, 0.906 (0.910 without), median count error 5.7 -> 8.6 % at all three.
-    """
-    if pair_elongation <= 0 or authentic.sum() < MIN_SINGLES:
-        return counts
-    single = float(np.median(bodies.area[authentic]))
-    pair = ~authentic & ~bodies.stroke & (counts == 1)
-    pair &= (bodies.elongation >= pair_elongation) & (bodies.area >= single)
-    return np.where(pair, 2, counts)

@@ -1,6 +1,6 @@
 """Colonies in a clump, counted by their cores over several levels (plate analysis, step 5).
 
-The distance transform of step 5 (:func:`labauto.vision.plate_bodies.merged_counts`) counts
+The distance transform of step 5 (:func:`labauto.vision.plate_counts.merged_counts`) counts
 the colonies of a merged body by the waists of its outline. Colonies that overlap by more than
 about half their width leave no waist: a compact clump of three or four reads as one or two
 (AGAR plate 518 is full of them). Each colony, though, is a dome: its departure from the agar

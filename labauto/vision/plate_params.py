@@ -128,7 +128,7 @@ class PlateParams:
     pair_elongation : float
         A merged body of one peak whose axis ratio is at least this and whose area is at least
         the plate's median single colony's (authentic or mixed, of 3 or more) counts as two
-        (:func:`labauto.vision.plate_bodies.pair_counts`); 0 turns it off.
+        (:func:`labauto.vision.plate_counts.pair_counts`); 0 turns it off.
     sliver_elongation : float
         A body no point of which lies as deep inside it as the peak floor (``peak_floor_ratio``
         of the plate's median single colony's inscribed radius) and whose axis ratio is at

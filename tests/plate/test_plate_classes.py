@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from labauto.vision import plate_bodies
+from labauto.vision import plate_bodies, plate_mixed
 from labauto.vision.plate import PlateParams, analyze_plate
 
 AGAR_BGR = (120, 180, 205)
@@ -155,7 +155,7 @@ def test_a_round_colony_with_a_wide_translucent_centre_counts_one(
     assert largest().klass == "merged"  # the hole is a pocket as deep as a waist: not offered
     assert largest().estimated_count == 1
     # counted on the body as it is, the ring of peaks reads as two colonies or more
-    monkeypatch.setattr("labauto.vision.plate_bodies.holes_filled", lambda mask, *_: mask)
+    monkeypatch.setattr("labauto.vision.plate_counts.holes_filled", lambda mask, *_: mask)
     assert largest().estimated_count >= 2
 
 
@@ -182,14 +182,14 @@ def test_a_printed_character_touching_a_colony_is_not_counted(
     assert body().estimated_count >= 8
 
 
-@pytest.mark.parametrize("spot_mm", [plate_bodies.SPOT_MM, 0.0])
+@pytest.mark.parametrize("spot_mm", [plate_mixed.SPOT_MM, 0.0])
 def test_a_small_colony_on_a_large_one_is_mixed(
     monkeypatch: pytest.MonkeyPatch, spot_mm: float
 ) -> None:
     # a pale colony 0.8 mm across near the edge of one 8 mm across: 1 % of it, far below the
     # outlier fraction, yet a second species in the pick; a pale arc (a ring of the colony's
     # own texture) as large in area is no second colony
-    monkeypatch.setattr(plate_bodies, "SPOT_MM", spot_mm)
+    monkeypatch.setattr(plate_mixed, "SPOT_MM", spot_mm)
     img = _agar_with([(150.0, 300.0, 40.0), (420.0, 300.0, 40.0)])
     pale = (150, 200, 230)
     cv2.circle(img, (175, 290), 4, pale, -1, cv2.LINE_AA)
@@ -200,7 +200,7 @@ def test_a_small_colony_on_a_large_one_is_mixed(
     assert spotted.mix_score < 0.06  # the fraction alone would offer it
 
 
-@pytest.mark.parametrize("large_ratio", [plate_bodies.LARGE_BODY_RATIO, math.inf])
+@pytest.mark.parametrize("large_ratio", [plate_mixed.LARGE_BODY_RATIO, math.inf])
 def test_small_colonies_on_a_large_one_are_counted(
     monkeypatch: pytest.MonkeyPatch, large_ratio: float
 ) -> None:

@@ -14,7 +14,15 @@ import numpy as np
 import pytest
 
 from labauto.vision import dish as dish_module
-from labauto.vision import plate_area, plate_bodies, plate_canvas, plate_cores, plate_objects
+from labauto.vision import (
+    plate_area,
+    plate_bodies,
+    plate_canvas,
+    plate_cores,
+    plate_counts,
+    plate_mixed,
+    plate_objects,
+)
 from labauto.vision.plate import PlateParams, analyze_plate
 from labauto.vision.plate_background import deviation
 
@@ -94,7 +102,7 @@ def _reference_merged_count(dt: np.ndarray, valley_ratio: float, least_peak: flo
                 break
         if separate:
             kept.append((px, py, pv))
-    return max(plate_bodies.MIN_MERGED_COUNT, len(kept))
+    return max(plate_counts.MIN_MERGED_COUNT, len(kept))
 
 
 def _reference_mix_score(roi: np.ndarray, body: dict, params: PlateParams) -> float:
@@ -206,8 +214,8 @@ def test_vectorised_mix_scores_and_merged_counts_equal_per_body(
         if not widest:
             everyone &= bodies.width < bodies.width[everyone].max()
         round_outline = des_shape[bodies.index]
-        scores, _ = plate_bodies.mix_scores(roi, bodies, everyone, params)
-        counts = plate_bodies.merged_counts(
+        scores, _ = plate_mixed.mix_scores(roi, bodies, everyone, params)
+        counts = plate_counts.merged_counts(
             bodies, everyone, params.valley_ratio, least_peak, round_outline
         )
         for b, k in enumerate(bodies.index):
