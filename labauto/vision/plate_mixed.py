@@ -1,5 +1,5 @@
 """Mixed colonies: the share of a colony's inner pixels that do not follow one species' colour,
-and round spots of a second colony on a large one (plate analysis, step 5).
+and round spots of a second colony on a large one (plate analysis, steps 4 and 5).
 
 :mod:`labauto.vision.plate` gives the rule and its measured figures.
 """
