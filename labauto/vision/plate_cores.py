@@ -17,13 +17,12 @@ clump falls apart into one round core per colony. This is the multi-threshold id
   at least ``_CORE_RADIUS_RATIO`` (0.35) times the plate's single-colony radius as a disc,
   filling at least ``_CORE_FILL`` (0.85) of the ellipse inscribed in its bounding box, and no
   more than 1 / ``_CORE_ASPECT`` (0.6) times as long as wide. Read from the components'
-  statistics, all bodies at once on the bodies' shared canvas (:class:`Bodies`), one pass per
-  level. Only the bodies with a dome (below) are labelled, on the canvas cut to them and in
-  bands of like widths (:mod:`labauto.vision.plate_canvas`); each body's levels come from a
-  partial sort of its own values. On the 15-Mpixel AGAR plate 525 (25 clumps of large
-  colonies) this took the cores from 36 to 24 ms (median of 15, taking turns), with the
-  same counts on every plate; on the crowded phone photos (104-163 clumps) they stay at
-  11-17 ms.
+  statistics, all bodies at once on the bodies' shared canvas (:class:`Bodies`): only the
+  bodies with a dome (below), on the canvas cut to them, one pass per level and band of like
+  widths (:mod:`labauto.vision.plate_canvas`); each body's levels come from a partial sort of
+  its own values. On the 15-Mpixel AGAR plate 525 (25 clumps of large colonies) this took the
+  cores from 36 to 24 ms (median of 15, taking turns; ninth session), with the same counts on
+  every plate; on the crowded phone photos (104-163 clumps) they stay at 11-17 ms.
 * **A dome to cut.** A body whose smoothed departure rises by less than ``least_range``
   from its 5th to its 95th percentile has no dome, only noise or texture, and is not cut:
   :mod:`labauto.vision.plate` passes half of eq. 1's threshold as a colour distance

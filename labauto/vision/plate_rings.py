@@ -49,6 +49,10 @@ circles on 12031, whose missed large colonies stayed 19-20; AGAR F1 0.892-0.895 
 Swept again on the pipeline of 2026-12-07 (F1 0.910, eighth session): ``canny_high`` 30-60 with
 ``perfectness`` 0.7-0.8 gave F1 0.910-0.911, median count error 5.7-6.5 %, phone-counts
 1.9-2.1 %.
+A blurred red blot seen through the agar of phone photo IMG_2525 (6.6 mm) comes in as a ring
+colony. A ring's inside of the agar's grey, which the blot's is not, does not tell them apart:
+the rings found on the AGAR photographs read -11 to +12 grey levels from the agar round them
+at their centre and -17 to +14 on their edge, the blot -7 and 0 (ninth session).
 """
 
 from __future__ import annotations

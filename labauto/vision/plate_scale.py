@@ -18,6 +18,10 @@ pixels of one image:
   picking at 7 px/mm 429 -> 844 (native 879), at 4.5 px/mm those holding no boxed colony 58 -> 15;
   phone-counts' median count error 8.0 -> 6.1 % at 7 px/mm, 5.7 -> 6.2 % at 4.5 px/mm. Upsampling
   only to 10 px/mm was worse (F1 0.793, 0.725). Images between the two scales are used as they are.
+  A coarser ``analysis_px_per_mm`` would buy time (a 1.3-Mpixel plate's pixels fall with its
+  square) but costs colonies: 10 and 8 px/mm (``min_analysis_px_per_mm`` 6.7 and 5.3) gave AGAR
+  F1 0.905 and 0.880 (0.910 at 12), median count error 8.3 and 9.6 % (5.7 %), phone-counts 3.0
+  and 5.5 % (1.9 %) (2026-12-07, ninth session).
   A coarse frame's dust is a blur of a pixel or two that the resampling widens past the
   opening: 24 generated plates (seeds 1000-1023, six agars) resampled to 7 and 4.5 px/mm show
   20 and 28 false colonies, all dust specks (1 at their own scale). A least colony of 2-3 pixels
