@@ -85,12 +85,17 @@ class Bodies:
     concavity: np.ndarray
     elongation: np.ndarray
 
+    @property
+    def slot(self) -> np.ndarray:
+        """Canvas rows each body takes: its crop and the gap rows after it."""
+        return np.diff(np.append(self.row, len(self.row_body)))
+
     def slots_of(self, which: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         """A smaller canvas of only the bodies where ``which`` is true (the layout's rules
         still hold): which canvas rows it keeps, each body's first row on it (0 for the
         others), and its width, the widest of those bodies' crops (a stroke left out no
         longer widens it)."""
-        slot = np.diff(np.append(self.row, len(self.row_body)))
+        slot = self.slot
         rows = which[np.repeat(np.arange(len(slot)), slot)]
         first_row = np.zeros(len(slot), np.intp)
         first_row[which] = np.cumsum(slot[which]) - slot[which]

@@ -123,8 +123,7 @@ def core_counts(
     for b, distance in smoothed.items():
         r = first_row[b]
         canvas[r : r + distance.shape[0], : distance.shape[1]] = distance
-    slot = np.diff(np.append(bodies.row, len(bodies.row_body)))
-    bands = bands_of(first_row[dome], slot[dome], bodies.width[dome], len(row_body))
+    bands = bands_of(first_row[dome], bodies.slot[dome], bodies.width[dome], len(row_body))
     for level in levels:
         above = (inside & (canvas > level[np.maximum(row_body, 0)][:, None])).view(np.uint8)
         for r0, r1, band_width in bands:

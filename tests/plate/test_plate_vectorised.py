@@ -196,7 +196,7 @@ def test_bodies_measured_band_by_band_equal_one_band(
             measured.append(plate_bodies.measure_bodies(contours, fg, des_shape, params, {}))
         banded, whole = measured
         monkeypatch.setattr(plate_canvas, "_BAND_WASTE", 0)
-        slot = np.diff(np.append(banded.row, len(banded.row_body)))
+        slot = banded.slot
         assert len(plate_canvas.bands_of(banded.row, slot, banded.width, slot.sum())) > 10
         for name in ("mask", "dt", "area", "r_in", "stroke", "concavity"):
             np.testing.assert_array_equal(getattr(banded, name), getattr(whole, name))
